@@ -1,0 +1,1 @@
+//! Mesh files: PLY (ascii, binary), OBJ and STL (ascii, binary) in; PLY out.

@@ -1,0 +1,23 @@
+//! Glint's geometry core: triangle meshes and their file formats, the five parametric parts of
+//! the paper's evaluation, signed distance grids, SE(3) and symmetry-aware pose errors, camera
+//! models and image buffers.
+//!
+//! Conventions (see `shared/DESIGN.md`):
+//! - lengths are metres and angles radians, unless a name says otherwise (`_mm`, `_deg`);
+//! - `t_a_b: Isometry3<f64>` maps a point from frame b to frame a: `p_a = t_a_b * p_b`;
+//! - poses are perturbed on the left, `T ← exp(δ)·T`, with `δ = (ρ, φ)`, translation first;
+//! - meshes are `f32` (rendering precision), estimation is `f64`.
+
+pub mod camera;
+pub mod glam_interop;
+pub mod image;
+pub mod io;
+pub mod mesh;
+pub mod parts;
+pub mod pose_error;
+pub mod sdf;
+pub mod se3;
+pub mod symmetry;
+
+pub use mesh::{LengthUnit, MeshError, MeshReport, TriMesh};
+pub use symmetry::Symmetry;

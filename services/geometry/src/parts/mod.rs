@@ -1,0 +1,1 @@
+//! The five parts of the paper's evaluation as parametric watertight meshes.
