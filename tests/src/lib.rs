@@ -1,1 +1,1 @@
-
+//! Glint's workspace end-to-end tests live in `tests/`; this crate has no library code.

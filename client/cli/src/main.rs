@@ -1,1 +1,61 @@
-fn main(){}
+//! `glint`: the command-line entry point of Glint.
+//!
+//! With no arguments it runs the main job, [`demo`], on embedded defaults.
+
+mod bench;
+mod demo;
+mod mesh_cmd;
+mod preview;
+mod progress;
+
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "glint",
+    version,
+    about = "Active 6D pose refinement of shiny parts with a structured-light camera"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// The main job: builds the five evaluation parts, checks them and writes a report.
+    Demo(demo::DemoArgs),
+    /// Mesh tools: export a part, inspect a mesh file.
+    #[command(subcommand)]
+    Mesh(mesh_cmd::MeshCommand),
+    /// Benchmarks that print tables (and write CSV with --csv).
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+}
+
+fn main() -> std::process::ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        None => demo::run(&demo::DemoArgs {
+            out: PathBuf::from(demo::DEFAULT_OUT),
+        }),
+        Some(Command::Demo(args)) => demo::run(&args),
+        Some(Command::Mesh(cmd)) => mesh_cmd::run(cmd),
+        Some(Command::Bench(cmd)) => bench::run(cmd),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -40,7 +40,10 @@ impl PinholeIntrinsics {
         cy_px: f64,
     ) -> Result<Self, CameraError> {
         if width_px == 0 || height_px == 0 || width_px > 65535 || height_px > 65535 {
-            return Err(CameraError::BadSize { width: width_px, height: height_px });
+            return Err(CameraError::BadSize {
+                width: width_px,
+                height: height_px,
+            });
         }
         for (field, value) in [("fx_px", fx_px), ("fy_px", fy_px)] {
             if !(value.is_finite() && value > 0.0) {
@@ -52,24 +55,47 @@ impl PinholeIntrinsics {
                 return Err(CameraError::NotFinite { field, value });
             }
         }
-        Ok(Self { width_px, height_px, fx_px, fy_px, cx_px, cy_px })
+        Ok(Self {
+            width_px,
+            height_px,
+            fx_px,
+            fy_px,
+            cx_px,
+            cy_px,
+        })
     }
 
     /// The Ensenso N35 cameras that captured ROBI: 1280×1024, fx = fy = 1083.1 px.
     pub fn ensenso_n35() -> Self {
-        Self { width_px: 1280, height_px: 1024, fx_px: 1083.1, fy_px: 1083.1, cx_px: 640.0, cy_px: 512.0 }
+        Self {
+            width_px: 1280,
+            height_px: 1024,
+            fx_px: 1083.1,
+            fy_px: 1083.1,
+            cx_px: 640.0,
+            cy_px: 512.0,
+        }
     }
 
     /// The same camera sampled at another resolution (same field of view).
     pub fn resized(&self, width_px: u32, height_px: u32) -> Result<Self, CameraError> {
         let sx = width_px as f64 / self.width_px as f64;
         let sy = height_px as f64 / self.height_px as f64;
-        Self::new(width_px, height_px, self.fx_px * sx, self.fy_px * sy, self.cx_px * sx, self.cy_px * sy)
+        Self::new(
+            width_px,
+            height_px,
+            self.fx_px * sx,
+            self.fy_px * sy,
+            self.cx_px * sx,
+            self.cy_px * sy,
+        )
     }
 
     /// The calibration matrix K.
     pub fn k(&self) -> Matrix3<f64> {
-        Matrix3::new(self.fx_px, 0.0, self.cx_px, 0.0, self.fy_px, self.cy_px, 0.0, 0.0, 1.0)
+        Matrix3::new(
+            self.fx_px, 0.0, self.cx_px, 0.0, self.fy_px, self.cy_px, 0.0, 0.0, 1.0,
+        )
     }
 
     /// Projects a camera-frame point (metres) to continuous pixel coordinates; `None` behind
@@ -77,7 +103,10 @@ impl PinholeIntrinsics {
     #[inline]
     pub fn project(&self, p_c: &Point3<f64>) -> Option<Point2<f64>> {
         (p_c.z > 0.0).then(|| {
-            Point2::new(self.fx_px * p_c.x / p_c.z + self.cx_px, self.fy_px * p_c.y / p_c.z + self.cy_px)
+            Point2::new(
+                self.fx_px * p_c.x / p_c.z + self.cx_px,
+                self.fy_px * p_c.y / p_c.z + self.cy_px,
+            )
         })
     }
 
@@ -85,7 +114,11 @@ impl PinholeIntrinsics {
     /// coordinates `uv`: `z K⁻¹ (u, v, 1)ᵀ` (eq 6).
     #[inline]
     pub fn unproject(&self, uv: &Point2<f64>, z_m: f64) -> Point3<f64> {
-        Point3::new((uv.x - self.cx_px) / self.fx_px * z_m, (uv.y - self.cy_px) / self.fy_px * z_m, z_m)
+        Point3::new(
+            (uv.x - self.cx_px) / self.fx_px * z_m,
+            (uv.y - self.cy_px) / self.fy_px * z_m,
+            z_m,
+        )
     }
 
     /// The continuous coordinates of pixel `(u, v)`'s centre.
@@ -106,14 +139,23 @@ pub struct StereoRig {
 impl StereoRig {
     pub fn new(intrinsics: PinholeIntrinsics, baseline_m: f64) -> Result<Self, CameraError> {
         if !(baseline_m.is_finite() && baseline_m > 0.0) {
-            return Err(CameraError::NotPositive { field: "baseline_m", value: baseline_m });
+            return Err(CameraError::NotPositive {
+                field: "baseline_m",
+                value: baseline_m,
+            });
         }
-        Ok(Self { intrinsics, baseline_m })
+        Ok(Self {
+            intrinsics,
+            baseline_m,
+        })
     }
 
     /// The Ensenso N35 of ROBI: baseline 101.18 mm.
     pub fn ensenso_n35() -> Self {
-        Self { intrinsics: PinholeIntrinsics::ensenso_n35(), baseline_m: 0.10118 }
+        Self {
+            intrinsics: PinholeIntrinsics::ensenso_n35(),
+            baseline_m: 0.10118,
+        }
     }
 
     /// Depth (m) of a disparity (px): `z = f·b/d`.
@@ -164,7 +206,8 @@ mod tests {
         // At 0.6 m the N35 sees 182.6 px of disparity.
         assert!((d - 1083.1 * 0.10118 / 0.6).abs() < 1e-9);
         let h = 1e-4;
-        let numeric = (rig.depth_from_disparity(d + h) - rig.depth_from_disparity(d - h)) / (2.0 * h);
+        let numeric =
+            (rig.depth_from_disparity(d + h) - rig.depth_from_disparity(d - h)) / (2.0 * h);
         assert!((numeric - rig.depth_per_disparity(d)).abs() < 1e-9);
     }
 }

@@ -6,7 +6,12 @@ pub enum ImageError {
     #[error("image size {width}×{height} px must be non-zero")]
     ZeroSize { width: u32, height: u32 },
     #[error("image of {width}×{height} px needs {expected} samples, got {actual}")]
-    LengthMismatch { width: u32, height: u32, expected: usize, actual: usize },
+    LengthMismatch {
+        width: u32,
+        height: u32,
+        expected: usize,
+        actual: usize,
+    },
 }
 
 /// A row-major single-channel image; pixel `(u, v)` is column u, row v.
@@ -25,9 +30,18 @@ impl<T: Copy> Image<T> {
         }
         let expected = width as usize * height as usize;
         if data.len() != expected {
-            return Err(ImageError::LengthMismatch { width, height, expected, actual: data.len() });
+            return Err(ImageError::LengthMismatch {
+                width,
+                height,
+                expected,
+                actual: data.len(),
+            });
         }
-        Ok(Self { width, height, data })
+        Ok(Self {
+            width,
+            height,
+            data,
+        })
     }
 
     /// An image with every pixel `value`.
@@ -54,7 +68,8 @@ impl<T: Copy> Image<T> {
     /// The pixel at column `u`, row `v`, or `None` outside the image.
     #[inline]
     pub fn get(&self, u: u32, v: u32) -> Option<T> {
-        (u < self.width && v < self.height).then(|| self.data[v as usize * self.width as usize + u as usize])
+        (u < self.width && v < self.height)
+            .then(|| self.data[v as usize * self.width as usize + u as usize])
     }
 
     /// Sets the pixel at `(u, v)`; ignored outside the image.
@@ -91,7 +106,12 @@ impl DepthMap {
 
     /// Fraction of pixels with a valid depth.
     pub fn coverage(&self) -> f64 {
-        let valid = self.depth_m.data().iter().filter(|z| z.is_finite() && **z > 0.0).count();
+        let valid = self
+            .depth_m
+            .data()
+            .iter()
+            .filter(|z| z.is_finite() && **z > 0.0)
+            .count();
         valid as f64 / self.depth_m.data().len() as f64
     }
 }
@@ -102,10 +122,21 @@ mod tests {
 
     #[test]
     fn buffers_are_checked() {
-        assert_eq!(Image::<u8>::new(0, 3, vec![]), Err(ImageError::ZeroSize { width: 0, height: 3 }));
+        assert_eq!(
+            Image::<u8>::new(0, 3, vec![]),
+            Err(ImageError::ZeroSize {
+                width: 0,
+                height: 3
+            })
+        );
         assert_eq!(
             Image::new(2, 3, vec![0u16; 5]),
-            Err(ImageError::LengthMismatch { width: 2, height: 3, expected: 6, actual: 5 })
+            Err(ImageError::LengthMismatch {
+                width: 2,
+                height: 3,
+                expected: 6,
+                actual: 5
+            })
         );
         let mut img = Image::filled(4, 2, 0.0f32).unwrap();
         img.set(3, 1, 2.5);

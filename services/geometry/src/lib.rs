@@ -15,9 +15,11 @@ pub mod io;
 pub mod mesh;
 pub mod parts;
 pub mod pose_error;
+pub mod sampling;
 pub mod sdf;
 pub mod se3;
 pub mod symmetry;
 
 pub use mesh::{LengthUnit, MeshError, MeshReport, TriMesh};
+pub use parts::Part;
 pub use symmetry::Symmetry;

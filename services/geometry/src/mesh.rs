@@ -34,7 +34,9 @@ impl FromStr for LengthUnit {
         match s {
             "mm" => Ok(LengthUnit::Millimetre),
             "m" => Ok(LengthUnit::Metre),
-            other => Err(format!("unknown length unit {other:?}: expected \"mm\" or \"m\"")),
+            other => Err(format!(
+                "unknown length unit {other:?}: expected \"mm\" or \"m\""
+            )),
         }
     }
 }
@@ -54,9 +56,20 @@ pub enum MeshError {
     #[error("the mesh is empty ({vertices} vertices, {triangles} triangles)")]
     Empty { vertices: usize, triangles: usize },
     #[error("vertex {index} is not finite: ({x}, {y}, {z})")]
-    NonFiniteVertex { index: usize, x: f32, y: f32, z: f32 },
-    #[error("triangle {triangle} refers to vertex {vertex}, but the mesh has only {vertex_count} vertices")]
-    IndexOutOfRange { triangle: usize, vertex: u32, vertex_count: usize },
+    NonFiniteVertex {
+        index: usize,
+        x: f32,
+        y: f32,
+        z: f32,
+    },
+    #[error(
+        "triangle {triangle} refers to vertex {vertex}, but the mesh has only {vertex_count} vertices"
+    )]
+    IndexOutOfRange {
+        triangle: usize,
+        vertex: u32,
+        vertex_count: usize,
+    },
     #[error("all {triangles} triangles are degenerate (repeated vertices or zero area)")]
     AllDegenerate { triangles: usize },
     #[error(
@@ -111,10 +124,16 @@ impl MeshReport {
             ));
         }
         if self.open_edges > 0 {
-            w.push(format!("{} open edges: the mesh is not watertight", self.open_edges));
+            w.push(format!(
+                "{} open edges: the mesh is not watertight",
+                self.open_edges
+            ));
         }
         if self.non_manifold_edges > 0 {
-            w.push(format!("{} non-manifold edges (3+ faces)", self.non_manifold_edges));
+            w.push(format!(
+                "{} non-manifold edges (3+ faces)",
+                self.non_manifold_edges
+            ));
         }
         if self.inconsistent_edges > 0 {
             w.push(format!(
@@ -155,14 +174,21 @@ const DEGENERATE_RELATIVE_AREA: f32 = 1e-9;
 
 impl TriMesh {
     pub fn new(vertices: Vec<Point3<f32>>, triangles: Vec<[u32; 3]>) -> Self {
-        Self { vertices, triangles }
+        Self {
+            vertices,
+            triangles,
+        }
     }
 
     /// The corners of triangle `i`.
     #[inline]
     pub fn triangle(&self, i: usize) -> [Point3<f32>; 3] {
         let [a, b, c] = self.triangles[i];
-        [self.vertices[a as usize], self.vertices[b as usize], self.vertices[c as usize]]
+        [
+            self.vertices[a as usize],
+            self.vertices[b as usize],
+            self.vertices[c as usize],
+        ]
     }
 
     /// Area-weighted normal of triangle `i` (length = 2 × area).
@@ -174,7 +200,9 @@ impl TriMesh {
 
     /// Unit outward normal of triangle `i`, or zero for a degenerate one.
     pub fn face_normal(&self, i: usize) -> Vector3<f32> {
-        self.triangle_cross(i).try_normalize(0.0).unwrap_or_else(Vector3::zeros)
+        self.triangle_cross(i)
+            .try_normalize(0.0)
+            .unwrap_or_else(Vector3::zeros)
     }
 
     /// Whether triangle `i` has a repeated vertex or a negligible area.
@@ -184,14 +212,19 @@ impl TriMesh {
             return true;
         }
         let [pa, pb, pc] = self.triangle(i);
-        let longest = (pb - pa).norm_squared().max((pc - pb).norm_squared()).max((pa - pc).norm_squared());
+        let longest = (pb - pa)
+            .norm_squared()
+            .max((pc - pb).norm_squared())
+            .max((pa - pc).norm_squared());
         let twice_area = self.triangle_cross(i).norm();
         longest == 0.0 || 0.5 * twice_area < DEGENERATE_RELATIVE_AREA * longest
     }
 
     /// Total surface area, m².
     pub fn area(&self) -> f64 {
-        (0..self.triangles.len()).map(|i| 0.5 * self.triangle_cross(i).norm() as f64).sum()
+        (0..self.triangles.len())
+            .map(|i| 0.5 * self.triangle_cross(i).norm() as f64)
+            .sum()
     }
 
     /// Signed enclosed volume by the divergence theorem, m³ (exact for a closed mesh).
@@ -207,13 +240,21 @@ impl TriMesh {
     /// Axis-aligned bounds, or `None` for a mesh without vertices.
     pub fn aabb(&self) -> Option<(Point3<f32>, Point3<f32>)> {
         let first = *self.vertices.first()?;
-        Some(self.vertices.iter().fold((first, first), |(lo, hi), p| (lo.inf(p), hi.sup(p))))
+        Some(
+            self.vertices
+                .iter()
+                .fold((first, first), |(lo, hi), p| (lo.inf(p), hi.sup(p))),
+        )
     }
 
     /// This mesh with every vertex scaled by `factor` (e.g. millimetres → metres).
     pub fn scaled(&self, factor: f32) -> Self {
         Self {
-            vertices: self.vertices.iter().map(|p| Point3::from(p.coords * factor)).collect(),
+            vertices: self
+                .vertices
+                .iter()
+                .map(|p| Point3::from(p.coords * factor))
+                .collect(),
             triangles: self.triangles.clone(),
         }
     }
@@ -230,7 +271,8 @@ impl TriMesh {
     pub fn append(&mut self, other: &TriMesh) {
         let offset = self.vertices.len() as u32;
         self.vertices.extend_from_slice(&other.vertices);
-        self.triangles.extend(other.triangles.iter().map(|t| t.map(|i| i + offset)));
+        self.triangles
+            .extend(other.triangles.iter().map(|t| t.map(|i| i + offset)));
     }
 
     /// Merges vertices with bit-identical positions (STL stores every triangle's corners
@@ -259,7 +301,9 @@ impl TriMesh {
 
     /// Drops triangles with a repeated vertex or zero area; returns how many.
     pub fn remove_degenerate_triangles(&mut self) -> usize {
-        let keep: Vec<bool> = (0..self.triangles.len()).map(|i| !self.is_degenerate(i)).collect();
+        let keep: Vec<bool> = (0..self.triangles.len())
+            .map(|i| !self.is_degenerate(i))
+            .collect();
         let before = self.triangles.len();
         let mut k = keep.iter();
         self.triangles.retain(|_| *k.next().unwrap_or(&true));
@@ -275,20 +319,36 @@ impl TriMesh {
                 triangles: self.triangles.len(),
             });
         }
-        if let Some((index, p)) =
-            self.vertices.iter().enumerate().find(|(_, p)| !p.coords.iter().all(|c| c.is_finite()))
+        if let Some((index, p)) = self
+            .vertices
+            .iter()
+            .enumerate()
+            .find(|(_, p)| !p.coords.iter().all(|c| c.is_finite()))
         {
-            return Err(MeshError::NonFiniteVertex { index, x: p.x, y: p.y, z: p.z });
+            return Err(MeshError::NonFiniteVertex {
+                index,
+                x: p.x,
+                y: p.y,
+                z: p.z,
+            });
         }
         let n = self.vertices.len();
         for (triangle, t) in self.triangles.iter().enumerate() {
             if let Some(&vertex) = t.iter().find(|&&i| i as usize >= n) {
-                return Err(MeshError::IndexOutOfRange { triangle, vertex, vertex_count: n });
+                return Err(MeshError::IndexOutOfRange {
+                    triangle,
+                    vertex,
+                    vertex_count: n,
+                });
             }
         }
-        let degenerate_triangles = (0..self.triangles.len()).filter(|&i| self.is_degenerate(i)).count();
+        let degenerate_triangles = (0..self.triangles.len())
+            .filter(|&i| self.is_degenerate(i))
+            .count();
         if degenerate_triangles == self.triangles.len() {
-            return Err(MeshError::AllDegenerate { triangles: degenerate_triangles });
+            return Err(MeshError::AllDegenerate {
+                triangles: degenerate_triangles,
+            });
         }
         let topology = EdgeTopology::of(self);
         let (aabb_min, aabb_max) = self.aabb().expect("non-empty: checked above");
@@ -341,7 +401,10 @@ impl TriMesh {
                 })
                 .push(i as u32);
         }
-        order.into_iter().map(|r| by_root.remove(&r).unwrap_or_default()).collect()
+        order
+            .into_iter()
+            .map(|r| by_root.remove(&r).unwrap_or_default())
+            .collect()
     }
 
     /// The sub-mesh made of the given triangles, with only the vertices they use.
@@ -371,7 +434,8 @@ struct EdgeTopology {
 impl EdgeTopology {
     fn of(mesh: &TriMesh) -> Self {
         // Per undirected edge: (uses in direction lo→hi, uses in direction hi→lo).
-        let mut uses: HashMap<(u32, u32), (u32, u32)> = HashMap::with_capacity(mesh.triangles.len() * 3 / 2);
+        let mut uses: HashMap<(u32, u32), (u32, u32)> =
+            HashMap::with_capacity(mesh.triangles.len() * 3 / 2);
         for t in &mesh.triangles {
             for k in 0..3 {
                 let (a, b) = (t[k], t[(k + 1) % 3]);
@@ -379,14 +443,14 @@ impl EdgeTopology {
                     continue;
                 }
                 let e = uses.entry((a.min(b), a.max(b))).or_insert((0, 0));
-                if a < b {
-                    e.0 += 1
-                } else {
-                    e.1 += 1
-                }
+                if a < b { e.0 += 1 } else { e.1 += 1 }
             }
         }
-        let mut topology = Self { open_edges: 0, non_manifold_edges: 0, inconsistent_edges: 0 };
+        let mut topology = Self {
+            open_edges: 0,
+            non_manifold_edges: 0,
+            inconsistent_edges: 0,
+        };
         for &(forward, backward) in uses.values() {
             match forward + backward {
                 1 => topology.open_edges += 1,
@@ -443,18 +507,31 @@ mod tests {
 
     #[test]
     fn unusable_meshes_are_errors_not_panics() {
-        assert!(matches!(TriMesh::default().validate(), Err(MeshError::Empty { .. })));
+        assert!(matches!(
+            TriMesh::default().validate(),
+            Err(MeshError::Empty { .. })
+        ));
         let mut nan = tetrahedron();
         nan.vertices[2].y = f32::NAN;
-        assert!(matches!(nan.validate(), Err(MeshError::NonFiniteVertex { index: 2, .. })));
+        assert!(matches!(
+            nan.validate(),
+            Err(MeshError::NonFiniteVertex { index: 2, .. })
+        ));
         let mut bad_index = tetrahedron();
         bad_index.triangles[1][2] = 9;
         assert_eq!(
             bad_index.validate(),
-            Err(MeshError::IndexOutOfRange { triangle: 1, vertex: 9, vertex_count: 4 })
+            Err(MeshError::IndexOutOfRange {
+                triangle: 1,
+                vertex: 9,
+                vertex_count: 4
+            })
         );
         let all_degenerate = TriMesh::new(tetrahedron().vertices, vec![[0, 0, 1], [1, 2, 2]]);
-        assert!(matches!(all_degenerate.validate(), Err(MeshError::AllDegenerate { .. })));
+        assert!(matches!(
+            all_degenerate.validate(),
+            Err(MeshError::AllDegenerate { .. })
+        ));
         // Out-of-range indices must not panic the component search either.
         assert_eq!(bad_index.connected_components().len(), 1);
     }

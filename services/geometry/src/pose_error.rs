@@ -38,11 +38,23 @@ pub struct CorrectThreshold {
 
 impl CorrectThreshold {
     /// 5 mm / 5°, the paper's main metric.
-    pub const MM5_DEG5: Self = Self { translation_m: 5e-3, rotation_rad: 5.0 * std::f64::consts::PI / 180.0, label: "5mm5deg" };
+    pub const MM5_DEG5: Self = Self {
+        translation_m: 5e-3,
+        rotation_rad: 5.0 * std::f64::consts::PI / 180.0,
+        label: "5mm5deg",
+    };
     /// 2 mm / 2°, the strict metric.
-    pub const MM2_DEG2: Self = Self { translation_m: 2e-3, rotation_rad: 2.0 * std::f64::consts::PI / 180.0, label: "2mm2deg" };
+    pub const MM2_DEG2: Self = Self {
+        translation_m: 2e-3,
+        rotation_rad: 2.0 * std::f64::consts::PI / 180.0,
+        label: "2mm2deg",
+    };
     /// 30 mm / 30°: the gate on initial poses.
-    pub const MM30_DEG30: Self = Self { translation_m: 30e-3, rotation_rad: 30.0 * std::f64::consts::PI / 180.0, label: "30mm30deg" };
+    pub const MM30_DEG30: Self = Self {
+        translation_m: 30e-3,
+        rotation_rad: 30.0 * std::f64::consts::PI / 180.0,
+        label: "30mm30deg",
+    };
 }
 
 /// The error of `t_c_o_est` against `t_c_o_gt` (object → any common frame), minimised over
@@ -53,7 +65,11 @@ impl CorrectThreshold {
 /// `a`, the minimum over all `Rot(a, θ)` of `∠(M Rot(a, θ))` is the angle between `a` and `M a`
 /// (every rotation taking `a` to `M a` turns by at least that angle, and one turns by exactly
 /// that), so no sampling is needed.
-pub fn pose_error(t_c_o_est: &Isometry3<f64>, t_c_o_gt: &Isometry3<f64>, symmetry: &Symmetry) -> PoseError {
+pub fn pose_error(
+    t_c_o_est: &Isometry3<f64>,
+    t_c_o_gt: &Isometry3<f64>,
+    symmetry: &Symmetry,
+) -> PoseError {
     let translation_m = (t_c_o_est.translation.vector - t_c_o_gt.translation.vector).norm();
     let r_est_inv_gt: UnitQuaternion<f64> = t_c_o_est.rotation.inverse() * t_c_o_gt.rotation;
     let rotation_rad = symmetry
@@ -67,7 +83,10 @@ pub fn pose_error(t_c_o_est: &Isometry3<f64>, t_c_o_gt: &Isometry3<f64>, symmetr
             }
         })
         .fold(f64::INFINITY, f64::min);
-    PoseError { translation_m, rotation_rad }
+    PoseError {
+        translation_m,
+        rotation_rad,
+    }
 }
 
 #[cfg(test)]
@@ -101,9 +120,15 @@ mod tests {
         let gt = pose(Vector3::new(0.3, -1.0, 0.2), 1.1, [0.0, 0.0, 0.5]);
         let sixfold = Symmetry::cyclic(Axis::Z, 6);
         // The truth turned by 60° about its own z plus a 1° wobble: 1° off under 6-fold symmetry.
-        let est = gt * pose(Vector3::z(), PI / 3.0, [0.0; 3]) * pose(Vector3::x(), 1f64.to_radians(), [0.0; 3]);
+        let est = gt
+            * pose(Vector3::z(), PI / 3.0, [0.0; 3])
+            * pose(Vector3::x(), 1f64.to_radians(), [0.0; 3]);
         let e = pose_error(&est, &gt, &sixfold);
-        assert!((e.rotation_deg() - 1.0).abs() < 1e-9, "{}", e.rotation_deg());
+        assert!(
+            (e.rotation_deg() - 1.0).abs() < 1e-9,
+            "{}",
+            e.rotation_deg()
+        );
         // Without the symmetry the same estimate is ~60° off.
         assert!(pose_error(&est, &gt, &Symmetry::none()).rotation_deg() > 59.0);
         // 30° about z is as far from 6-fold symmetric as it gets.
@@ -118,7 +143,9 @@ mod tests {
         let est = gt * pose(Vector3::z(), 2.3, [0.0; 3]);
         assert!(pose_error(&est, &gt, &spin).rotation_rad < 1e-9);
         // A 3° tilt of the axis stays 3° whatever the spin.
-        let tilted = gt * pose(Vector3::z(), 1.2, [0.0; 3]) * pose(Vector3::y(), 3f64.to_radians(), [0.0; 3]);
+        let tilted = gt
+            * pose(Vector3::z(), 1.2, [0.0; 3])
+            * pose(Vector3::y(), 3f64.to_radians(), [0.0; 3]);
         assert!((pose_error(&tilted, &gt, &spin).rotation_deg() - 3.0).abs() < 1e-9);
     }
 }

@@ -33,7 +33,10 @@ impl Default for SdfConfig {
     /// 1 mm voxels and 10 mm padding: fine enough for the 2 mm/2° metric on parts of tens of
     /// millimetres, and wide enough that points of a pose 10 mm off still land in the grid.
     fn default() -> Self {
-        Self { voxel_size_m: 1e-3, padding_m: 10e-3 }
+        Self {
+            voxel_size_m: 1e-3,
+            padding_m: 10e-3,
+        }
     }
 }
 
@@ -50,7 +53,12 @@ pub enum SdfError {
         "a grid of {nx}×{ny}×{nz} nodes is over the limit of {limit} nodes: use a larger voxel \
          size or less padding (is the mesh unit right? a mm mesh read as metres is 1000× too big)"
     )]
-    TooLarge { nx: usize, ny: usize, nz: usize, limit: usize },
+    TooLarge {
+        nx: usize,
+        ny: usize,
+        nz: usize,
+        limit: usize,
+    },
 }
 
 /// Most nodes a grid may have (~1 GiB of f32).
@@ -124,7 +132,12 @@ impl SdfGrid {
         let total = dims.iter().try_fold(1usize, |acc, &n| acc.checked_mul(n));
         if total.is_none_or(|t| t > MAX_GRID_NODES) {
             let [nx, ny, nz] = dims;
-            return Err(SdfError::TooLarge { nx, ny, nz, limit: MAX_GRID_NODES });
+            return Err(SdfError::TooLarge {
+                nx,
+                ny,
+                nz,
+                limit: MAX_GRID_NODES,
+            });
         }
         // Centre the grid on the padded box so padding is symmetric.
         let span = Vector3::new(dims[0] - 1, dims[1] - 1, dims[2] - 1).cast::<f64>() * h;
@@ -134,29 +147,47 @@ impl SdfGrid {
         let [nx, ny, nz] = dims;
         let done = std::sync::atomic::AtomicUsize::new(0);
         let mut values_m = vec![0f32; nx * ny * nz];
-        values_m.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slice)| {
-            for j in 0..ny {
-                for i in 0..nx {
-                    let p = origin_m + Vector3::new(i as f64, j as f64, k as f64) * h;
-                    slice[j * nx + i] = signed_distance(&shells, glam::Vec3::new(p.x as f32, p.y as f32, p.z as f32));
+        values_m
+            .par_chunks_mut(nx * ny)
+            .enumerate()
+            .for_each(|(k, slice)| {
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let p = origin_m + Vector3::new(i as f64, j as f64, k as f64) * h;
+                        slice[j * nx + i] = signed_distance(
+                            &shells,
+                            glam::Vec3::new(p.x as f32, p.y as f32, p.z as f32),
+                        );
+                    }
                 }
-            }
-            let finished = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            progress(finished, nz);
-        });
-        Ok(Self { origin_m, voxel_size_m: h, dims, values_m })
+                let finished = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                progress(finished, nz);
+            });
+        Ok(Self {
+            origin_m,
+            voxel_size_m: h,
+            dims,
+            values_m,
+        })
     }
 
     fn shells(mesh: &TriMesh) -> Result<Vec<Shell>, SdfError> {
         let mut shells = Vec::new();
         for component in mesh.connected_components() {
             let sub = mesh.submesh(&component);
-            let orientation = if sub.signed_volume() >= 0.0 { 1.0 } else { -1.0 };
+            let orientation = if sub.signed_volume() >= 0.0 {
+                1.0
+            } else {
+                -1.0
+            };
             let vertices = sub.vertices.iter().map(vec3_from_point).collect();
             // validate() has already rejected empty meshes, so parry's only error cannot occur;
             // map it anyway rather than unwrap.
             let bvh = ParryTriMesh::with_flags(vertices, sub.triangles, TriMeshFlags::ORIENTED)
-                .map_err(|_| MeshError::Empty { vertices: 0, triangles: 0 })?;
+                .map_err(|_| MeshError::Empty {
+                    vertices: 0,
+                    triangles: 0,
+                })?;
             shells.push(Shell { bvh, orientation });
         }
         Ok(shells)
@@ -194,19 +225,29 @@ impl SdfGrid {
     #[inline]
     pub fn sample(&self, p: &Point3<f64>) -> SdfSample {
         let (lo, hi) = self.bounds();
-        let q = p.coords.zip_zip_map(&lo.coords, &hi.coords, |x, l, h| x.clamp(l, h));
+        let q = p
+            .coords
+            .zip_zip_map(&lo.coords, &hi.coords, |x, l, h| x.clamp(l, h));
         let outside = p.coords - q;
         let (value, mut gradient) = self.trilinear(&Point3::from(q));
         let offset = outside.norm();
         if offset == 0.0 {
-            return SdfSample { distance_m: value, gradient, inside_grid: p.coords.iter().all(|c| c.is_finite()) };
+            return SdfSample {
+                distance_m: value,
+                gradient,
+                inside_grid: p.coords.iter().all(|c| c.is_finite()),
+            };
         }
         for axis in 0..3 {
             if outside[axis] != 0.0 {
                 gradient[axis] = 0.0; // clamped axis: the interpolant no longer moves with p
             }
         }
-        SdfSample { distance_m: value + offset, gradient: gradient + outside / offset, inside_grid: false }
+        SdfSample {
+            distance_m: value + offset,
+            gradient: gradient + outside / offset,
+            inside_grid: false,
+        }
     }
 
     /// Trilinear value and gradient at a point inside the grid box.
@@ -220,7 +261,9 @@ impl SdfGrid {
             (i, x - i as f64)
         };
         let ((i, fx), (j, fy), (k, fz)) = (cell(g.x, nx), cell(g.y, ny), cell(g.z, nz));
-        let at = |di: usize, dj: usize, dk: usize| self.values_m[((k + dk) * ny + j + dj) * nx + i + di] as f64;
+        let at = |di: usize, dj: usize, dk: usize| {
+            self.values_m[((k + dk) * ny + j + dj) * nx + i + di] as f64
+        };
         let (c000, c100, c010, c110) = (at(0, 0, 0), at(1, 0, 0), at(0, 1, 0), at(1, 1, 0));
         let (c001, c101, c011, c111) = (at(0, 0, 1), at(1, 0, 1), at(0, 1, 1), at(1, 1, 1));
         // Interpolate along x, then y, then z; differentiate each stage.
@@ -241,6 +284,29 @@ impl SdfGrid {
     }
 }
 
+/// How far a symmetry is from exact on a grid: the largest `|SDF(S·p) − SDF(p)|`, metres, over
+/// the points `p` (object frame) and the group elements `S` sampled with `continuous_steps`
+/// per continuous axis. An exact symmetry gives the grid's interpolation error (< ½ voxel at
+/// each of the two samples); the declared `tolerance_m` adds to that.
+pub fn symmetry_deviation_m(
+    grid: &SdfGrid,
+    points: &[Point3<f64>],
+    symmetry: &crate::symmetry::Symmetry,
+    continuous_steps: usize,
+) -> f64 {
+    let elements = symmetry.sample(continuous_steps);
+    points
+        .par_iter()
+        .map(|p| {
+            let d = grid.sample(p).distance_m;
+            elements
+                .iter()
+                .map(|s| (grid.sample(&(s * p)).distance_m - d).abs())
+                .fold(0.0, f64::max)
+        })
+        .reduce(|| 0.0, f64::max)
+}
+
 /// The signed distance to the union of solid shells minus the cavities.
 fn signed_distance(shells: &[Shell], p: glam::Vec3) -> f32 {
     let mut solid = f32::INFINITY;
@@ -253,7 +319,11 @@ fn signed_distance(shells: &[Shell], p: glam::Vec3) -> f32 {
             cavity_cut = cavity_cut.max(d);
         }
     }
-    if solid.is_infinite() { cavity_cut } else { solid.max(cavity_cut) }
+    if solid.is_infinite() {
+        cavity_cut
+    } else {
+        solid.max(cavity_cut)
+    }
 }
 
 #[cfg(test)]
@@ -270,7 +340,11 @@ pub(crate) mod tests {
             let theta = PI as f32 * k as f32 / rings as f32;
             for i in 0..n {
                 let phi = 2.0 * PI as f32 * i as f32 / n as f32;
-                vertices.push(Point3::new(r * theta.sin() * phi.cos(), r * theta.sin() * phi.sin(), r * theta.cos()));
+                vertices.push(Point3::new(
+                    r * theta.sin() * phi.cos(),
+                    r * theta.sin() * phi.sin(),
+                    r * theta.cos(),
+                ));
             }
         }
         vertices.push(Point3::new(0.0, 0.0, -r));
@@ -331,7 +405,13 @@ pub(crate) mod tests {
     fn random_points(lo: Point3<f64>, hi: Point3<f64>, n: usize, seed: u64) -> Vec<Point3<f64>> {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
         (0..n)
-            .map(|_| Point3::new(rng.random_range(lo.x..hi.x), rng.random_range(lo.y..hi.y), rng.random_range(lo.z..hi.z)))
+            .map(|_| {
+                Point3::new(
+                    rng.random_range(lo.x..hi.x),
+                    rng.random_range(lo.y..hi.y),
+                    rng.random_range(lo.z..hi.z),
+                )
+            })
             .collect()
     }
 
@@ -339,7 +419,14 @@ pub(crate) mod tests {
     fn sphere_distances_within_half_a_voxel() {
         let r = 0.02;
         // 128 segments: chord sag r(1 − cos(π/128)) ≈ 6 µm, far below the half-voxel bound.
-        let grid = SdfGrid::build(&uv_sphere(r as f32, 128), &SdfConfig { voxel_size_m: H, padding_m: 5e-3 }).unwrap();
+        let grid = SdfGrid::build(
+            &uv_sphere(r as f32, 128),
+            &SdfConfig {
+                voxel_size_m: H,
+                padding_m: 5e-3,
+            },
+        )
+        .unwrap();
         let (lo, hi) = grid.bounds();
         let mut worst: f64 = 0.0;
         for p in random_points(lo, hi, 20_000, 1) {
@@ -351,7 +438,11 @@ pub(crate) mod tests {
             assert!(s.inside_grid);
             worst = worst.max((s.distance_m - (p.coords.norm() - r)).abs());
             if (p.coords.norm() - r).abs() < 3.0 * H {
-                assert!((s.gradient.norm() - 1.0).abs() < 0.05, "|∇| = {} at {p}", s.gradient.norm());
+                assert!(
+                    (s.gradient.norm() - 1.0).abs() < 0.05,
+                    "|∇| = {} at {p}",
+                    s.gradient.norm()
+                );
                 assert!(s.gradient.normalize().dot(&p.coords.normalize()) > 0.99);
             }
         }
@@ -361,7 +452,14 @@ pub(crate) mod tests {
     #[test]
     fn box_distances_within_half_a_voxel() {
         let e = [0.015, 0.01, 0.005];
-        let grid = SdfGrid::build(&cuboid(e.map(|x| x as f32)), &SdfConfig { voxel_size_m: H, padding_m: 6e-3 }).unwrap();
+        let grid = SdfGrid::build(
+            &cuboid(e.map(|x| x as f32)),
+            &SdfConfig {
+                voxel_size_m: H,
+                padding_m: 6e-3,
+            },
+        )
+        .unwrap();
         let (lo, hi) = grid.bounds();
         let mut worst: f64 = 0.0;
         for p in random_points(lo, hi, 20_000, 2) {
@@ -373,7 +471,11 @@ pub(crate) mod tests {
             let mut sorted = q;
             sorted.sort_by(|a, b| b.total_cmp(a));
             if exact.abs() < 3.0 * H && sorted[1] < -2.0 * H - exact.abs() {
-                assert!((s.gradient.norm() - 1.0).abs() < 1e-3, "|∇| = {} at {p}", s.gradient.norm());
+                assert!(
+                    (s.gradient.norm() - 1.0).abs() < 1e-3,
+                    "|∇| = {} at {p}",
+                    s.gradient.norm()
+                );
             }
         }
         assert!(worst < 0.5 * H, "worst error {worst}");
@@ -381,13 +483,25 @@ pub(crate) mod tests {
 
     #[test]
     fn gradient_is_the_derivative_of_the_value() {
-        let grid = SdfGrid::build(&uv_sphere(0.02, 64), &SdfConfig { voxel_size_m: H, padding_m: 4e-3 }).unwrap();
+        let grid = SdfGrid::build(
+            &uv_sphere(0.02, 64),
+            &SdfConfig {
+                voxel_size_m: H,
+                padding_m: 4e-3,
+            },
+        )
+        .unwrap();
         let (lo, hi) = grid.bounds();
         let step = 1e-7;
         // Points inside and outside the grid; the interpolant is smooth within a cell, so
         // central differences agree to O(step) unless a cell face is crossed (rare; skipped).
         let mut checked = 0;
-        for p in random_points(lo - Vector3::repeat(0.01), hi + Vector3::repeat(0.01), 2000, 3) {
+        for p in random_points(
+            lo - Vector3::repeat(0.01),
+            hi + Vector3::repeat(0.01),
+            2000,
+            3,
+        ) {
             let s = grid.sample(&p);
             let numeric = Vector3::from_fn(|a, _| {
                 let mut d = Vector3::zeros();
@@ -399,7 +513,11 @@ pub(crate) mod tests {
                 (g - g.round()).abs() < 1e-3
             });
             if !crosses_cell {
-                assert!((numeric - s.gradient).norm() < 1e-5, "at {p}: {numeric} vs {}", s.gradient);
+                assert!(
+                    (numeric - s.gradient).norm() < 1e-5,
+                    "at {p}: {numeric} vs {}",
+                    s.gradient
+                );
                 checked += 1;
             }
         }
@@ -408,14 +526,25 @@ pub(crate) mod tests {
 
     #[test]
     fn outside_the_grid_is_defined_and_flagged() {
-        let grid = SdfGrid::build(&cuboid([0.01; 3]), &SdfConfig { voxel_size_m: H, padding_m: 2e-3 }).unwrap();
+        let grid = SdfGrid::build(
+            &cuboid([0.01; 3]),
+            &SdfConfig {
+                voxel_size_m: H,
+                padding_m: 2e-3,
+            },
+        )
+        .unwrap();
         let far = Point3::new(0.5, 0.0, 0.0);
         let s = grid.sample(&far);
         assert!(!s.inside_grid);
         // Upper bound of the true distance 0.49 m, exceeding it by at most the clamped value's error.
         assert!(s.distance_m >= 0.49 - 0.5 * H && s.distance_m < 0.5);
         assert!((s.gradient - Vector3::x()).norm() < 1e-3);
-        assert!(grid.sample(&Point3::new(f64::NAN, 0.0, 0.0)).distance_m.is_nan());
+        assert!(
+            grid.sample(&Point3::new(f64::NAN, 0.0, 0.0))
+                .distance_m
+                .is_nan()
+        );
     }
 
     #[test]
@@ -423,8 +552,17 @@ pub(crate) mod tests {
         // Two overlapping boxes: the point in the overlap's centre is inside by the larger depth,
         // and the buried faces inside the overlap do not create a false zero.
         let mut union = cuboid([0.01; 3]);
-        union.append(&cuboid([0.01; 3]).transformed(&nalgebra::Isometry3::translation(0.01, 0.0, 0.0)));
-        let grid = SdfGrid::build(&union, &SdfConfig { voxel_size_m: H, padding_m: 2e-3 }).unwrap();
+        union.append(
+            &cuboid([0.01; 3]).transformed(&nalgebra::Isometry3::translation(0.01, 0.0, 0.0)),
+        );
+        let grid = SdfGrid::build(
+            &union,
+            &SdfConfig {
+                voxel_size_m: H,
+                padding_m: 2e-3,
+            },
+        )
+        .unwrap();
         let s = grid.sample(&Point3::new(0.01, 0.0, 0.0));
         assert!((s.distance_m + 0.01).abs() < 0.5 * H, "{}", s.distance_m);
 
@@ -435,7 +573,14 @@ pub(crate) mod tests {
             t.swap(1, 2);
         }
         hollow.append(&inner);
-        let grid = SdfGrid::build(&hollow, &SdfConfig { voxel_size_m: H, padding_m: 2e-3 }).unwrap();
+        let grid = SdfGrid::build(
+            &hollow,
+            &SdfConfig {
+                voxel_size_m: H,
+                padding_m: 2e-3,
+            },
+        )
+        .unwrap();
         assert!((grid.sample(&Point3::origin()).distance_m - 0.005).abs() < 0.5 * H);
         let wall = grid.sample(&Point3::new(0.0065, 0.0, 0.0)).distance_m;
         assert!((wall + 0.0015).abs() < 0.5 * H, "{wall}");
@@ -444,11 +589,36 @@ pub(crate) mod tests {
     #[test]
     fn bad_configs_and_open_meshes_are_errors() {
         let mesh = cuboid([0.01; 3]);
-        assert_eq!(SdfGrid::build(&mesh, &SdfConfig { voxel_size_m: 0.0, padding_m: 0.0 }).unwrap_err(), SdfError::BadVoxelSize(0.0));
-        assert!(matches!(SdfGrid::build(&mesh, &SdfConfig { voxel_size_m: 1e-3, padding_m: f64::NAN }), Err(SdfError::BadPadding(_))));
-        assert!(matches!(SdfGrid::build(&mesh.scaled(1000.0), &SdfConfig::default()), Err(SdfError::TooLarge { .. })));
+        assert_eq!(
+            SdfGrid::build(
+                &mesh,
+                &SdfConfig {
+                    voxel_size_m: 0.0,
+                    padding_m: 0.0
+                }
+            )
+            .unwrap_err(),
+            SdfError::BadVoxelSize(0.0)
+        );
+        assert!(matches!(
+            SdfGrid::build(
+                &mesh,
+                &SdfConfig {
+                    voxel_size_m: 1e-3,
+                    padding_m: f64::NAN
+                }
+            ),
+            Err(SdfError::BadPadding(_))
+        ));
+        assert!(matches!(
+            SdfGrid::build(&mesh.scaled(1000.0), &SdfConfig::default()),
+            Err(SdfError::TooLarge { .. })
+        ));
         let mut open = mesh.clone();
         open.triangles.pop();
-        assert!(matches!(SdfGrid::build(&open, &SdfConfig::default()), Err(SdfError::Mesh(MeshError::NotWatertight { .. }))));
+        assert!(matches!(
+            SdfGrid::build(&open, &SdfConfig::default()),
+            Err(SdfError::Mesh(MeshError::NotWatertight { .. }))
+        ));
     }
 }

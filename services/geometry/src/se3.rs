@@ -3,7 +3,9 @@
 //! A twist is `ξ = (ρ, φ) ∈ ℝ⁶`, translation first, and perturbs a pose on the left:
 //! `T ← exp(ξ)·T`. This module is the only owner of that convention.
 
-use nalgebra::{Isometry3, Matrix3, Matrix3x6, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{
+    Isometry3, Matrix3, Matrix3x6, Point3, Translation3, UnitQuaternion, Vector3, Vector6,
+};
 
 /// `[v]×`, the cross-product matrix: `[v]× w = v × w`.
 #[inline]
@@ -20,7 +22,10 @@ fn so3_left_jacobian(phi: &Vector3<f64>) -> Matrix3<f64> {
         (0.5 - theta2 / 24.0, 1.0 / 6.0 - theta2 / 120.0)
     } else {
         let theta = theta2.sqrt();
-        ((1.0 - theta.cos()) / theta2, (theta - theta.sin()) / (theta2 * theta))
+        (
+            (1.0 - theta.cos()) / theta2,
+            (theta - theta.sin()) / (theta2 * theta),
+        )
     };
     Matrix3::identity() + k * a + k * k * b
 }
@@ -38,7 +43,9 @@ pub fn log(t: &Isometry3<f64>) -> Vector6<f64> {
     let phi = t.rotation.scaled_axis();
     let v = so3_left_jacobian(&phi);
     // V is invertible for θ < 2π; fall back to the translation itself if it is not.
-    let rho = v.try_inverse().map_or(t.translation.vector, |v_inv| v_inv * t.translation.vector);
+    let rho = v
+        .try_inverse()
+        .map_or(t.translation.vector, |v_inv| v_inv * t.translation.vector);
     Vector6::new(rho.x, rho.y, rho.z, phi.x, phi.y, phi.z)
 }
 
@@ -52,8 +59,10 @@ pub fn perturb_left(delta: &Vector6<f64>, t: &Isometry3<f64>) -> Isometry3<f64> 
 #[inline]
 pub fn point_jacobian_left(p: &Point3<f64>) -> Matrix3x6<f64> {
     let mut j = Matrix3x6::zeros();
-    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&Matrix3::identity());
-    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-skew(&p.coords)));
+    j.fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&Matrix3::identity());
+    j.fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&(-skew(&p.coords)));
     j
 }
 
@@ -83,7 +92,14 @@ mod tests {
     fn exp_of_pure_translation_and_pure_rotation() {
         let t = exp(&Vector6::new(1.0, 2.0, 3.0, 0.0, 0.0, 0.0));
         assert!((t.translation.vector - Vector3::new(1.0, 2.0, 3.0)).norm() < 1e-15);
-        let r = exp(&Vector6::new(0.0, 0.0, 0.0, 0.0, 0.0, std::f64::consts::FRAC_PI_2));
+        let r = exp(&Vector6::new(
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            std::f64::consts::FRAC_PI_2,
+        ));
         assert!((r * Point3::new(1.0, 0.0, 0.0) - Point3::new(0.0, 1.0, 0.0)).norm() < 1e-15);
     }
 

@@ -89,7 +89,11 @@ impl Symmetry {
 
     /// All rotations about `axis` (a body of revolution).
     pub fn continuous(axis: Axis) -> Self {
-        Self::from_generators(&[], Some(axis.unit()), format!("continuous:{}", axis.name()))
+        Self::from_generators(
+            &[],
+            Some(axis.unit()),
+            format!("continuous:{}", axis.name()),
+        )
     }
 
     /// The same group, declared exact only up to `tolerance_m`.
@@ -109,13 +113,21 @@ impl Symmetry {
         while let Some(e) = frontier.pop() {
             for g in generators {
                 let candidate = g * e;
-                if !elements.iter().any(|x| x.angle_to(&candidate) < SAME_ROTATION_RAD) {
+                if !elements
+                    .iter()
+                    .any(|x| x.angle_to(&candidate) < SAME_ROTATION_RAD)
+                {
                     elements.push(candidate);
                     frontier.push(candidate);
                 }
             }
         }
-        Self { discrete: elements, continuous_axis, tolerance_m: 0.0, spec }
+        Self {
+            discrete: elements,
+            continuous_axis,
+            tolerance_m: 0.0,
+            spec,
+        }
     }
 
     /// The finite part `D` of the group, identity first.
@@ -136,12 +148,18 @@ impl Symmetry {
     /// A finite sample of the group for numeric checks: every element of `D`, each composed
     /// with `steps` rotations about the continuous axis (evenly spaced, 0 included).
     pub fn sample(&self, steps: usize) -> Vec<Rotation3<f64>> {
-        let steps = if self.continuous_axis.is_some() { steps.max(1) } else { 1 };
+        let steps = if self.continuous_axis.is_some() {
+            steps.max(1)
+        } else {
+            1
+        };
         let mut out = Vec::with_capacity(self.discrete.len() * steps);
         for d in &self.discrete {
             for k in 0..steps {
                 let c = match self.continuous_axis {
-                    Some(axis) => UnitQuaternion::from_axis_angle(&axis, 2.0 * PI * k as f64 / steps as f64),
+                    Some(axis) => {
+                        UnitQuaternion::from_axis_angle(&axis, 2.0 * PI * k as f64 / steps as f64)
+                    }
                     None => UnitQuaternion::identity(),
                 };
                 out.push((d * c).to_rotation_matrix());
@@ -159,7 +177,9 @@ impl FromStr for Symmetry {
         let order = |s: &str| -> Result<u32, String> {
             match s.parse::<u32>() {
                 Ok(n) if (2..=360).contains(&n) => Ok(n),
-                _ => Err(format!("symmetry order {s:?} in {spec:?} must be an integer from 2 to 360")),
+                _ => Err(format!(
+                    "symmetry order {s:?} in {spec:?} must be an integer from 2 to 360"
+                )),
             }
         };
         match parts.as_slice() {
@@ -169,7 +189,9 @@ impl FromStr for Symmetry {
             ["dihedral", axis, n, flip] => {
                 let (axis, flip): (Axis, Axis) = (axis.parse()?, flip.parse()?);
                 if axis == flip {
-                    return Err(format!("in {spec:?} the flip axis must differ from the main axis"));
+                    return Err(format!(
+                        "in {spec:?} the flip axis must differ from the main axis"
+                    ));
                 }
                 Ok(Symmetry::dihedral(axis, order(n)?, flip))
             }
@@ -195,7 +217,10 @@ mod tests {
     fn group_orders_match_their_definitions() {
         assert_eq!(Symmetry::none().discrete_order(), 1);
         assert_eq!(Symmetry::cyclic(Axis::Z, 6).discrete_order(), 6);
-        assert_eq!(Symmetry::dihedral(Axis::Z, 20, Axis::X).discrete_order(), 40);
+        assert_eq!(
+            Symmetry::dihedral(Axis::Z, 20, Axis::X).discrete_order(),
+            40
+        );
         assert_eq!(Symmetry::continuous(Axis::Z).discrete_order(), 1);
         assert_eq!(Symmetry::continuous(Axis::Y).sample(36).len(), 36);
     }
@@ -205,7 +230,14 @@ mod tests {
         for spec in ["none", "continuous:z", "discrete:x:6", "dihedral:z:4:y"] {
             assert_eq!(spec.parse::<Symmetry>().unwrap().to_string(), spec);
         }
-        for bad in ["", "discrete:z", "discrete:w:3", "discrete:z:1", "continuous", "dihedral:z:4:z"] {
+        for bad in [
+            "",
+            "discrete:z",
+            "discrete:w:3",
+            "discrete:z:1",
+            "continuous",
+            "dihedral:z:4:z",
+        ] {
             let err = bad.parse::<Symmetry>().unwrap_err();
             assert!(!err.is_empty(), "{bad}");
         }

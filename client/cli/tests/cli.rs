@@ -1,0 +1,122 @@
+//! The `glint` binary as a user runs it: exit codes, files written, messages on bad input.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn glint(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_glint"))
+        .args(args)
+        .output()
+        .expect("the glint binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Asserts the run failed with `code` and a message, not a panic; returns stderr.
+fn fails_cleanly(o: &Output, code: i32) -> String {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(code), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!err.trim().is_empty());
+    err
+}
+
+#[test]
+fn export_then_info_round_trips_every_part() {
+    let dir = tempfile::tempdir().unwrap();
+    for part in ["eye-bolt", "tube-fitting", "chrome-screw", "gear", "zigzag"] {
+        let ply = dir.path().join(format!("{part}.ply"));
+        let png = dir.path().join(format!("{part}.png"));
+        let o = glint(&[
+            "mesh",
+            "export",
+            "--part",
+            part,
+            "--out",
+            ply.to_str().unwrap(),
+            "--preview",
+            png.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{part}: {}", stderr(&o));
+        let preview = image::open(&png).unwrap();
+        assert_eq!((preview.width(), preview.height()), (512, 512));
+
+        let o = glint(&[
+            "mesh",
+            "info",
+            ply.to_str().unwrap(),
+            "--unit",
+            "mm",
+            "--format",
+            "json",
+        ]);
+        assert!(o.status.success(), "{part}: {}", stderr(&o));
+        let info: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(info["watertight"], true, "{part}: {info}");
+        assert!(
+            info["warnings"].as_array().unwrap().is_empty(),
+            "{part}: {info}"
+        );
+        // ROBI-like size: every part spans tens of millimetres.
+        let extent: Vec<f64> = info["extent_mm"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let longest = extent.iter().cloned().fold(0.0, f64::max);
+        assert!((10.0..=100.0).contains(&longest), "{part}: {extent:?}");
+    }
+}
+
+#[test]
+fn bad_input_gets_a_clear_error_and_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("missing.ply");
+    let err = fails_cleanly(
+        &glint(&["mesh", "info", missing.to_str().unwrap(), "--unit", "mm"]),
+        1,
+    );
+    assert!(err.contains("missing.ply"), "{err}");
+
+    let garbage = dir.path().join("garbage.stl");
+    std::fs::write(
+        &garbage,
+        b"solid x\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 nope\n",
+    )
+    .unwrap();
+    let err = fails_cleanly(
+        &glint(&["mesh", "info", garbage.to_str().unwrap(), "--unit", "mm"]),
+        1,
+    );
+    assert!(err.contains("garbage.stl"), "{err}");
+
+    // clap's usage errors exit with 2 and list what is valid.
+    let err = fails_cleanly(
+        &glint(&["mesh", "export", "--part", "sprocket", "--out", "x.ply"]),
+        2,
+    );
+    assert!(err.contains("chrome-screw"), "{err}");
+    let err = fails_cleanly(
+        &glint(&["mesh", "info", garbage.to_str().unwrap(), "--unit", "inch"]),
+        2,
+    );
+    assert!(err.contains("mm"), "{err}");
+
+    let nowhere = dir.path().join("no/such/dir/gear.ply");
+    let err = fails_cleanly(
+        &glint(&[
+            "mesh",
+            "export",
+            "--part",
+            "gear",
+            "--out",
+            nowhere.to_str().unwrap(),
+        ]),
+        1,
+    );
+    assert!(err.contains("does not exist"), "{err}");
+    assert!(!Path::new(&nowhere).exists());
+}

@@ -1,0 +1,1 @@
+//! Dataset formats: BOP and ROBI.

@@ -1,0 +1,3 @@
+//! The mock structured-light camera and dataset formats.
+
+pub mod dataset;
