@@ -1,6 +1,10 @@
 //! Glint's renderer: how a structured-light camera sees shiny parts.
 //!
 //! Monochrome throughout (SLI cameras are grey-scale): radiance is one `f32` per pixel in
-//! W·sr⁻¹·m⁻² (relative units scaled by the projector's intensity).
+//! W·sr⁻¹·m⁻² for a projector intensity in W/sr.
 
 pub mod bsdf;
+pub mod integrator;
+pub mod projector;
+pub mod scene;
+pub mod sensor;
