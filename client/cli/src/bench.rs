@@ -28,6 +28,17 @@ pub enum BenchCommand {
         #[arg(long)]
         csv: Option<PathBuf>,
     },
+    /// The renderer and the mock camera on a bin scene: Mrays/s single- and multi-path (1 thread,
+    /// all cores) and the wall time of one full stereo capture at two resolutions.
+    Render {
+        #[arg(long, default_value = "chrome-screw", value_parser = crate::mesh_cmd::parse_part)]
+        part: Part,
+        #[arg(long, default_value_t = 8)]
+        instances: u32,
+        /// Samples per pixel for the ray-throughput rows.
+        #[arg(long, default_value_t = 2)]
+        spp: u32,
+    },
 }
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
@@ -38,6 +49,11 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
             samples,
             csv,
         } => bench_sdf(voxel_mm, padding_mm, samples, csv),
+        BenchCommand::Render {
+            part,
+            instances,
+            spp,
+        } => bench_render(part, instances, spp),
     }
 }
 
@@ -143,4 +159,81 @@ fn bench_sdf(
 fn sample_checksum(grid: &SdfGrid, p: &Point3<f64>) -> f64 {
     let s = grid.sample(p);
     s.distance_m + s.gradient.x
+}
+
+fn bench_render(part: Part, instances: u32, spp: u32) -> anyhow::Result<()> {
+    use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
+    use glint_camera::capture::{CaptureConfig, MockSliCamera};
+    use glint_camera::{materials, views};
+    use glint_render::integrator::{LightTransport, RenderSettings, render};
+    use glint_render::rig::SliRig;
+
+    anyhow::ensure!(
+        instances >= 1 && spp >= 1,
+        "--instances and --spp must be at least 1"
+    );
+    let bin = BinSpec::default();
+    let mesh = part.mesh();
+    let poses = drop_parts(&mesh, instances as usize, &bin, 1)?;
+    let scene = bin_scene(&mesh, &poses, materials::ground_truth(part), &bin)?;
+    let full = SliRig::ensenso_n35();
+    let t_w_c = views::spherical_cap(1, 0.6, 0.0, bin.centre(), full.stereo.baseline_m)[0];
+    let [camera, _] = full.cameras(&t_w_c);
+    let projector = full.projector(
+        &t_w_c,
+        glint_render::projector::Pattern::random_dots(640, 512, 0.5, 1),
+    );
+    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let threads = rayon::current_num_threads();
+    let mut rows = Vec::new();
+    for (name, transport) in [
+        ("single-path", LightTransport::SinglePath),
+        ("multi-path (4 bounces)", LightTransport::MULTI_PATH_DEFAULT),
+    ] {
+        let settings = RenderSettings {
+            transport,
+            samples_per_pixel: spp,
+            roi: None,
+            seed: 1,
+        };
+        let time = |f: &dyn Fn() -> u64| {
+            let start = Instant::now();
+            let rays = f();
+            rays as f64 / start.elapsed().as_secs_f64() / 1e6
+        };
+        let single = one_thread
+            .install(|| time(&|| render(&scene, &camera, &projector, &settings).rays_traced));
+        let all = time(&|| render(&scene, &camera, &projector, &settings).rays_traced);
+        rows.push((name, single, all));
+    }
+    println!(
+        "Renderer: {} × {instances} in the bin ({} triangles), 1280×1024, {spp} spp; {threads} threads for \"all cores\"\n",
+        part.display_name(),
+        scene.triangle_count()
+    );
+    println!("| light transport | Mrays/s, 1 thread | Mrays/s, all cores |");
+    println!("|---|---:|---:|");
+    for (name, single, all) in rows {
+        println!("| {name} | {single:.2} | {all:.2} |");
+    }
+    println!(
+        "\n| full stereo capture (render L+R multi-path 4 spp, sensor, matching) | wall time (s), all cores |"
+    );
+    println!("|---|---:|");
+    for (w, h) in [(1280, 1024), (640, 512)] {
+        let rig = full.resized(w, h)?;
+        let camera = MockSliCamera {
+            rig,
+            scene: &scene,
+            config: CaptureConfig::for_rig(&rig)?,
+        };
+        let start = Instant::now();
+        let capture = camera.capture(&t_w_c, 1)?;
+        println!(
+            "| {w}×{h} (coverage of the image: {:.2}) | {:.2} |",
+            capture.depth.coverage(),
+            start.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
 }

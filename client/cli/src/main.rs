@@ -3,6 +3,7 @@
 //! With no arguments it runs the main job, [`demo`], on embedded defaults.
 
 mod bench;
+mod capture_cmd;
 mod demo;
 mod mesh_cmd;
 mod preview;
@@ -27,6 +28,8 @@ struct Cli {
 enum Command {
     /// The main job: builds the five evaluation parts, checks them and writes a report.
     Demo(demo::DemoArgs),
+    /// Mock SLI camera: a bin of one part captured from several views.
+    Capture(capture_cmd::CaptureArgs),
     /// Mesh tools: export a part, inspect a mesh file.
     #[command(subcommand)]
     Mesh(mesh_cmd::MeshCommand),
@@ -48,6 +51,7 @@ fn main() -> std::process::ExitCode {
             out: PathBuf::from(demo::DEFAULT_OUT),
         }),
         Some(Command::Demo(args)) => demo::run(&args),
+        Some(Command::Capture(args)) => capture_cmd::run(&args),
         Some(Command::Mesh(cmd)) => mesh_cmd::run(cmd),
         Some(Command::Bench(cmd)) => bench::run(cmd),
     };

@@ -120,3 +120,64 @@ fn bad_input_gets_a_clear_error_and_no_output() {
     assert!(err.contains("does not exist"), "{err}");
     assert!(!Path::new(&nowhere).exists());
 }
+
+#[test]
+fn capture_writes_a_bop_scene_that_reads_back() {
+    use glint_camera::dataset::bop::BopSceneReader;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cap");
+    let o = glint(&[
+        "capture",
+        "--part",
+        "gear",
+        "--instances",
+        "3",
+        "--views",
+        "2",
+        "--seed",
+        "5",
+        "--resolution",
+        "320x256",
+        "--spp",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.contains("missing depth"), "{report}");
+
+    let scene = BopSceneReader::open(out.join("test/000001")).unwrap();
+    assert_eq!(scene.image_ids(), vec![0, 1]);
+    for im_id in [0, 1] {
+        let gts = scene.gt(im_id).unwrap();
+        assert!(!gts.is_empty() && gts.len() <= 3);
+        for gt in gts {
+            // Views are 0.5 m from the bin's floor centre; parts lie within ~0.15 m of it.
+            let z = gt.t_c_o.translation.z;
+            assert!((0.35..0.65).contains(&z), "part at z = {z} m");
+        }
+        let depth = scene.depth(im_id).unwrap();
+        assert_eq!((depth.depth_m.width(), depth.depth_m.height()), (320, 256));
+        assert!(
+            depth.coverage() > 0.05,
+            "matched depth on the bin at least: {}",
+            depth.coverage()
+        );
+    }
+    assert!(scene.gt_materials().unwrap().is_some());
+
+    let err = fails_cleanly(
+        &glint(&[
+            "capture",
+            "--part",
+            "gear",
+            "--resolution",
+            "12x7",
+            "--out",
+            "x",
+        ]),
+        2,
+    );
+    assert!(err.contains("64 to 8192"), "{err}");
+}

@@ -1,3 +1,9 @@
-//! The mock structured-light camera and dataset formats.
+//! The mock structured-light camera: bins of shiny parts, simulated SLI captures with real
+//! stereo matching, and the dataset formats captures are written in.
 
+pub mod bin;
+pub mod capture;
 pub mod dataset;
+pub mod effects;
+pub mod materials;
+pub mod views;

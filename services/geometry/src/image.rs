@@ -153,3 +153,133 @@ mod tests {
         assert_eq!(depth.get(1, 1), Some(0.7));
     }
 }
+
+/// A rectangle of whole pixels: columns `u_min..u_min + width`, rows `v_min..v_min + height`.
+///
+/// Pixel `(u, v)` covers the continuous square `[u, u+1) × [v, v+1)` (its centre is at
+/// `(u + 0.5, v + 0.5)`), so the rectangle covers `[u_min, u_end) × [v_min, v_end)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct PixelRect {
+    pub u_min: u32,
+    pub v_min: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl PixelRect {
+    pub const fn new(u_min: u32, v_min: u32, width: u32, height: u32) -> Self {
+        Self {
+            u_min,
+            v_min,
+            width,
+            height,
+        }
+    }
+
+    /// The whole of a `width × height` image.
+    pub const fn full(width: u32, height: u32) -> Self {
+        Self {
+            u_min: 0,
+            v_min: 0,
+            width,
+            height,
+        }
+    }
+
+    /// One past the last column.
+    #[inline]
+    pub const fn u_end(&self) -> u64 {
+        self.u_min as u64 + self.width as u64
+    }
+
+    /// One past the last row.
+    #[inline]
+    pub const fn v_end(&self) -> u64 {
+        self.v_min as u64 + self.height as u64
+    }
+
+    pub const fn is_empty(&self) -> bool {
+        self.width == 0 || self.height == 0
+    }
+
+    /// Number of pixels.
+    pub const fn area(&self) -> u64 {
+        self.width as u64 * self.height as u64
+    }
+
+    /// Whether pixel `(u, v)` lies inside.
+    #[inline]
+    pub const fn contains(&self, u: u32, v: u32) -> bool {
+        u >= self.u_min && (u as u64) < self.u_end() && v >= self.v_min && (v as u64) < self.v_end()
+    }
+
+    /// Whether the rectangle lies inside a `width × height` image.
+    pub const fn fits_in(&self, width: u32, height: u32) -> bool {
+        self.u_end() <= width as u64 && self.v_end() <= height as u64
+    }
+
+    /// The part inside a `width × height` image, or `None` if nothing is left.
+    pub fn clipped_to(&self, width: u32, height: u32) -> Option<Self> {
+        let u_end = self.u_end().min(width as u64) as u32;
+        let v_end = self.v_end().min(height as u64) as u32;
+        (self.u_min < u_end && self.v_min < v_end).then(|| Self {
+            u_min: self.u_min,
+            v_min: self.v_min,
+            width: u_end - self.u_min,
+            height: v_end - self.v_min,
+        })
+    }
+
+    /// The smallest rectangle holding every continuous point of `[u0, u1] × [v0, v1]` (in
+    /// pixel coordinates, e.g. a projected bounding box), clipped to a `width × height` image.
+    pub fn covering(u0: f64, v0: f64, u1: f64, v1: f64, width: u32, height: u32) -> Option<Self> {
+        if !(u0.is_finite() && v0.is_finite() && u1.is_finite() && v1.is_finite()) {
+            return None;
+        }
+        let lo_u = u0.min(u1).floor().clamp(0.0, width as f64) as u32;
+        let lo_v = v0.min(v1).floor().clamp(0.0, height as f64) as u32;
+        let hi_u = (u0.max(u1).floor() + 1.0).clamp(0.0, width as f64) as u32;
+        let hi_v = (v0.max(v1).floor() + 1.0).clamp(0.0, height as f64) as u32;
+        (lo_u < hi_u && lo_v < hi_v).then(|| Self::new(lo_u, lo_v, hi_u - lo_u, hi_v - lo_v))
+    }
+}
+
+impl std::fmt::Display for PixelRect {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "[{}, {}) × [{}, {})",
+            self.u_min,
+            self.u_end(),
+            self.v_min,
+            self.v_end()
+        )
+    }
+}
+
+#[cfg(test)]
+mod rect_tests {
+    use super::*;
+
+    #[test]
+    fn clipping_and_covering() {
+        let r = PixelRect::new(10, 20, 30, 40);
+        assert_eq!((r.u_end(), r.v_end(), r.area()), (40, 60, 1200));
+        assert!(r.contains(10, 20) && r.contains(39, 59) && !r.contains(40, 20));
+        assert!(r.fits_in(40, 60) && !r.fits_in(39, 60));
+        assert_eq!(r.clipped_to(25, 100), Some(PixelRect::new(10, 20, 15, 40)));
+        assert_eq!(r.clipped_to(10, 100), None);
+        // [3.2, 7.9] covers pixels 3..=7.
+        assert_eq!(
+            PixelRect::covering(7.9, 1.0, 3.2, 2.5, 100, 100),
+            Some(PixelRect::new(3, 1, 5, 2))
+        );
+        assert_eq!(
+            PixelRect::covering(-5.0, -5.0, 2.0, 2.0, 100, 100),
+            Some(PixelRect::new(0, 0, 3, 3))
+        );
+        assert_eq!(PixelRect::covering(120.0, 0.0, 130.0, 1.0, 100, 100), None);
+        assert_eq!(PixelRect::covering(f64::NAN, 0.0, 1.0, 1.0, 100, 100), None);
+        assert!(PixelRect::new(0, 0, 0, 5).is_empty());
+    }
+}

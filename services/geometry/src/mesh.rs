@@ -180,6 +180,43 @@ impl TriMesh {
         }
     }
 
+    /// An axis-aligned closed box around `centre` with `half_extents`, metres, faces outward.
+    pub fn cuboid(centre: [f64; 3], half_extents: [f64; 3]) -> Self {
+        let v = |x: f64, y: f64, z: f64| {
+            Point3::new(
+                (centre[0] + x * half_extents[0]) as f32,
+                (centre[1] + y * half_extents[1]) as f32,
+                (centre[2] + z * half_extents[2]) as f32,
+            )
+        };
+        Self::new(
+            vec![
+                v(-1., -1., -1.),
+                v(1., -1., -1.),
+                v(1., 1., -1.),
+                v(-1., 1., -1.),
+                v(-1., -1., 1.),
+                v(1., -1., 1.),
+                v(1., 1., 1.),
+                v(-1., 1., 1.),
+            ],
+            vec![
+                [0, 2, 1],
+                [0, 3, 2],
+                [4, 5, 6],
+                [4, 6, 7],
+                [0, 1, 5],
+                [0, 5, 4],
+                [2, 3, 7],
+                [2, 7, 6],
+                [1, 2, 6],
+                [1, 6, 5],
+                [0, 4, 7],
+                [0, 7, 3],
+            ],
+        )
+    }
+
     /// The corners of triangle `i`.
     #[inline]
     pub fn triangle(&self, i: usize) -> [Point3<f32>; 3] {

@@ -366,33 +366,7 @@ pub(crate) mod tests {
 
     /// An axis-aligned box with half extents `e`, centred at the origin.
     pub(crate) fn cuboid(e: [f32; 3]) -> TriMesh {
-        let v = |x: f32, y: f32, z: f32| Point3::new(x * e[0], y * e[1], z * e[2]);
-        TriMesh::new(
-            vec![
-                v(-1., -1., -1.),
-                v(1., -1., -1.),
-                v(1., 1., -1.),
-                v(-1., 1., -1.),
-                v(-1., -1., 1.),
-                v(1., -1., 1.),
-                v(1., 1., 1.),
-                v(-1., 1., 1.),
-            ],
-            vec![
-                [0, 2, 1],
-                [0, 3, 2],
-                [4, 5, 6],
-                [4, 6, 7],
-                [0, 1, 5],
-                [0, 5, 4],
-                [2, 3, 7],
-                [2, 7, 6],
-                [1, 2, 6],
-                [1, 6, 5],
-                [0, 4, 7],
-                [0, 7, 3],
-            ],
-        )
+        TriMesh::cuboid([0.0; 3], e.map(f64::from))
     }
 
     fn exact_box_sdf(p: &Point3<f64>, e: [f64; 3]) -> f64 {

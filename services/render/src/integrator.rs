@@ -12,7 +12,7 @@
 
 use glam::Vec3A;
 use glint_geometry::camera::PinholeIntrinsics;
-use glint_geometry::image::Image;
+use glint_geometry::image::{Image, PixelRect};
 use nalgebra::{Isometry3, Vector3};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
@@ -39,44 +39,6 @@ impl LightTransport {
         max_bounces: 4,
         roulette_after: 3,
     };
-}
-
-/// A rectangle of pixels `[u0, u0+width) × [v0, v0+height)`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PixelRect {
-    pub u0: u32,
-    pub v0: u32,
-    pub width: u32,
-    pub height: u32,
-}
-
-impl PixelRect {
-    /// The whole image.
-    pub fn full(intrinsics: &PinholeIntrinsics) -> Self {
-        Self {
-            u0: 0,
-            v0: 0,
-            width: intrinsics.width_px,
-            height: intrinsics.height_px,
-        }
-    }
-
-    /// This rectangle clipped to the image; `None` when nothing is left.
-    pub fn clipped(&self, intrinsics: &PinholeIntrinsics) -> Option<Self> {
-        let u1 = (self.u0.saturating_add(self.width)).min(intrinsics.width_px);
-        let v1 = (self.v0.saturating_add(self.height)).min(intrinsics.height_px);
-        (self.u0 < u1 && self.v0 < v1).then(|| Self {
-            u0: self.u0,
-            v0: self.v0,
-            width: u1 - self.u0,
-            height: v1 - self.v0,
-        })
-    }
-
-    #[inline]
-    pub fn contains(&self, u: u32, v: u32) -> bool {
-        u >= self.u0 && u < self.u0 + self.width && v >= self.v0 && v < self.v0 + self.height
-    }
 }
 
 /// How to render.
@@ -122,8 +84,8 @@ pub fn render(
     let (w, h) = (k.width_px, k.height_px);
     let roi = settings
         .roi
-        .and_then(|r| r.clipped(k))
-        .unwrap_or_else(|| PixelRect::full(k));
+        .and_then(|r| r.clipped_to(w, h))
+        .unwrap_or(PixelRect::full(w, h));
     let mut radiance = vec![0f32; (w * h) as usize];
     let mut depth = vec![f32::NAN; (w * h) as usize];
     let mut label = vec![0u16; (w * h) as usize];
@@ -142,13 +104,13 @@ pub fn render(
         .zip(label.par_chunks_mut(w as usize));
     let rays_traced: u64 = rows
         .enumerate()
-        .filter(|(v, _)| (roi.v0..roi.v0 + roi.height).contains(&(*v as u32)))
+        .filter(|(v, _)| (roi.v_min..roi.v_min + roi.height).contains(&(*v as u32)))
         .map(|(v, ((radiance_row, depth_row), label_row))| {
             let mut rng = rand_pcg::Pcg32::seed_from_u64(
                 settings.seed ^ (v as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             );
             let mut rays = 0u64;
-            for u in roi.u0..roi.u0 + roi.width {
+            for u in roi.u_min..roi.u_min + roi.width {
                 let mut sum = 0.0f32;
                 for s in 0..spp {
                     let (ju, jv) = if s == 0 {
@@ -462,8 +424,8 @@ mod tests {
     fn multi_path_adds_inter_reflections_and_its_variance_falls_as_one_over_n() {
         let (scene, camera, projector) = corner_scene();
         let roi = Some(PixelRect {
-            u0: 48,
-            v0: 32,
+            u_min: 48,
+            v_min: 32,
             width: 64,
             height: 64,
         });

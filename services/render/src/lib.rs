@@ -6,5 +6,7 @@
 pub mod bsdf;
 pub mod integrator;
 pub mod projector;
+pub mod rig;
 pub mod scene;
 pub mod sensor;
+pub mod stereo;
