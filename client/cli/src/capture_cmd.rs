@@ -159,6 +159,7 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
         )?;
         write_depth(&dir.join("depth.png"), &captures[0])?;
         write_depth(&dir.join("depth_diffuse_twin.png"), &captures[1])?;
+        write_capture_exr(&dir.join("capture.exr"), &captures[0])?;
         write_bop_image(
             &mut bop,
             k as u32,
@@ -209,7 +210,7 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
     let missing = |(eligible, valid): (usize, usize)| 1.0 - valid as f64 / eligible.max(1) as f64;
     report += &format!(
         "\n**All instances:** missing depth {:.3} shiny vs {:.3} diffuse twin; missing pixels on the shiny part by cause: \
-         saturated {}, low SNR {}, inter-reflection {}, other {}.\n\nImages per view: `view_NNN/left.png`, `right.png` \
+         saturated {}, low SNR {}, inter-reflection {}, other {}.\n\nImages per view: `view_NNN/capture.exr` (float channels: matched `depth_m` with NaN where missing, and for evaluation the ground-truth `gt_depth_m`, `gt_label` and left radiance `gt_left_radiance`), `left.png`, `right.png` \
          (pattern images as read out), `depth.png` and `depth_diffuse_twin.png` (near = blue, far = red, missing = magenta).\n",
         missing(totals[0]),
         missing(totals[1]),
@@ -336,5 +337,24 @@ fn write_bop_image(
     let label_to_gt: Vec<(u16, usize)> = visible.iter().enumerate().map(|(i, &l)| (l, i)).collect();
     bop.write_masks_from_labels(im_id, MaskKind::Visible, &capture.gt_label, &label_to_gt)?;
     bop.set_gt(im_id, &gts);
+    Ok(())
+}
+
+/// The view's float images as one EXR.
+fn write_capture_exr(path: &Path, capture: &StereoCapture) -> anyhow::Result<()> {
+    let label = Image::new(
+        capture.gt_label.width(),
+        capture.gt_label.height(),
+        capture.gt_label.data().iter().map(|&l| l as f32).collect(),
+    )?;
+    glint_render::exr_io::write_exr(
+        path,
+        &[
+            ("depth_m", &capture.depth.depth_m),
+            ("gt_depth_m", &capture.gt_depth_m),
+            ("gt_label", &label),
+            ("gt_left_radiance", &capture.gt_left_radiance),
+        ],
+    )?;
     Ok(())
 }

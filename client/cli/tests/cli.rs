@@ -164,6 +164,21 @@ fn capture_writes_a_bop_scene_that_reads_back() {
             "matched depth on the bin at least: {}",
             depth.coverage()
         );
+        // The float EXR of the same view holds the same matched depth, unquantised.
+        let exr = glint_render::exr_io::read_exr(&out.join(format!("view_{im_id:03}/capture.exr")))
+            .unwrap();
+        let names: Vec<&str> = exr.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names.len(), 4, "{names:?}");
+        let exr_depth = &exr.iter().find(|(n, _)| n == "depth_m").unwrap().1;
+        for (a, b) in exr_depth.data().iter().zip(depth.depth_m.data()) {
+            assert_eq!(a.is_finite(), b.is_finite());
+            if a.is_finite() {
+                assert!(
+                    (a - b).abs() <= 0.5e-4 + 1e-6,
+                    "BOP depth is quantised to 0.1 mm: {a} vs {b}"
+                );
+            }
+        }
     }
     assert!(scene.gt_materials().unwrap().is_some());
 

@@ -4,6 +4,7 @@
 //! W·sr⁻¹·m⁻² for a projector intensity in W/sr.
 
 pub mod bsdf;
+pub mod exr_io;
 pub mod integrator;
 pub mod projector;
 pub mod rig;
