@@ -4,6 +4,7 @@
 
 use glint_geometry::TriMesh;
 use glint_geometry::glam_interop::vec3_from_point;
+use image::ImageEncoder;
 use parry3d::query::{Ray, RayCast};
 use parry3d::shape::TriMesh as ParryTriMesh;
 use rayon::prelude::*;
@@ -70,5 +71,3 @@ pub fn render_png(mesh: &TriMesh, size: u32, view_dir: glam::Vec3) -> anyhow::Re
     )?;
     Ok(png)
 }
-
-use image::ImageEncoder;

@@ -204,7 +204,7 @@ pub fn drop_parts(
     Ok(placed)
 }
 
-/// The bin's contents touch nothing they should not: every probe above the floor.
+/// The lowest world z (metres) of `mesh` placed at `t_w_o`: ≥ 0 when it rests on or above the floor.
 pub fn lowest_point(mesh: &TriMesh, t_w_o: &Isometry3<f64>) -> f64 {
     mesh.vertices
         .iter()
