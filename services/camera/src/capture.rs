@@ -3,7 +3,7 @@
 //! quantisation), and match them with the stereo matcher. Missing depth emerges from that
 //! physics; nothing is masked by hand.
 
-use glint_geometry::image::{DepthMap, Image};
+use glint_geometry::image::{DepthMap, Image, normalised_intensity};
 use glint_render::integrator::{LightTransport, RenderSettings, render};
 use glint_render::projector::Pattern;
 use glint_render::rig::SliRig;
@@ -123,18 +123,9 @@ impl MockSliCamera<'_> {
         let sensor = &self.config.sensor;
         let left = sensor.read_out(&left_render.radiance, seed.wrapping_add(1));
         let right = sensor.read_out(&right_render.radiance, seed.wrapping_add(2));
-        let scale = 1.0 / sensor.max_dn() as f32;
-        let normalised = |img: &Image<u16>| {
-            Image::new(
-                img.width(),
-                img.height(),
-                img.data().iter().map(|&d| d as f32 * scale).collect(),
-            )
-            .expect("same size")
-        };
         let result = match_stereo(
-            &normalised(&left),
-            &normalised(&right),
+            &normalised_intensity(&left, sensor.max_dn()),
+            &normalised_intensity(&right, sensor.max_dn()),
             &self.config.matcher,
             None,
         )?;

@@ -1,0 +1,437 @@
+//! Per-pixel depth uncertainty of an SLI stereo capture, from its pattern images (eq 1–5).
+//!
+//! The disparity `d` of a left pixel is modelled as the minimiser of the SSD photometric error
+//! `e = I_L(u_L, v) − I_R(u_L − d, v)` over the matching window (eq 1). Its variance is the
+//! inverse Fisher information of that error (eq 2), `σ_d² = (Σ_i J_i² / σ_e,i²)⁻¹` with
+//! `J_i = ∂I/∂u` the x-gradient of the image over the window (eq 3), propagated to depth by
+//! `σ_z² = F σ_d² Fᵀ`, `F = ∂z/∂d = −f·b/d²` (eq 4). The gradient is taken once from the left
+//! image (window centred on `u_L`) and once from the right (window centred on `u_R = u_L − d`),
+//! and the larger variance is kept (eq 5): depth is only as good as the weaker image.
+//!
+//! Image noise: `e` is the difference of two noisy pixels, so `σ_e,i² = 2 σ_I²(I_i)` with
+//! `σ_I²(I)` the sensor's intensity-dependent noise variance. That comes from a
+//! [`NoiseModel`] the camera user measures (two shots of a static scene, the photon-transfer
+//! method), never from the simulator's settings.
+//!
+//! Intensities are normalised to full scale ([0, 1]); σ_z is in metres.
+
+use glint_geometry::camera::StereoRig;
+use glint_geometry::image::{DepthMap, Image, SummedAreaTable};
+
+/// Why an uncertainty could not be computed.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum UncertaintyError {
+    #[error("{what}: images are {a_w}×{a_h} and {b_w}×{b_h} px; they must be the same size")]
+    SizeMismatch {
+        what: &'static str,
+        a_w: u32,
+        a_h: u32,
+        b_w: u32,
+        b_h: u32,
+    },
+    #[error(
+        "noise model: only {pixels} unsaturated pixel pairs with signal; two shots of a lit, \
+         static scene are needed"
+    )]
+    TooFewNoiseSamples { pixels: usize },
+    #[error(
+        "noise model: the two shots differ by {rms:.3} of full scale RMS, far more than sensor \
+         noise; did the scene or the camera move between them?"
+    )]
+    ShotsDiffer { rms: f64 },
+}
+
+/// The sensor's noise variance as a function of normalised intensity, σ_I²(I): a table over
+/// equal-width intensity bins, linearly interpolated. Signal dependence matters: shot noise
+/// grows with the signal, and the camera response reshapes it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NoiseModel {
+    /// σ_I² at the centre of bin k, `(k + ½)/n`, in (full scale)².
+    pub variance_by_bin: Vec<f64>,
+    /// Lowest variance ever returned: the quantisation noise of one digital number, 1/12 DN².
+    pub floor_variance: f64,
+}
+
+impl NoiseModel {
+    /// Bins of the intensity axis.
+    pub const BINS: usize = 32;
+    /// Pixel pairs a bin needs for its own estimate; emptier bins borrow their neighbours'.
+    const MIN_BIN_SAMPLES: usize = 50;
+
+    /// A model with the same variance everywhere.
+    pub fn constant(variance: f64) -> Self {
+        Self {
+            variance_by_bin: vec![variance; Self::BINS],
+            floor_variance: variance,
+        }
+    }
+
+    /// Fits σ_I²(I) from two shots `a`, `b` of the same static scene with the same settings
+    /// (normalised intensities), read with `max_dn` digital numbers full scale: per pixel,
+    /// `(a − b)²/2` is an unbiased sample of σ_I² at intensity `(a + b)/2`. Pixels at or
+    /// above full scale (saturated, no noise left) are skipped. A bin's variance is a robust
+    /// mean: samples above 25× the bin's median are dropped (a pixel that changed, not
+    /// noise).
+    pub fn fit_from_pair(
+        a: &Image<f32>,
+        b: &Image<f32>,
+        max_dn: u16,
+    ) -> Result<Self, UncertaintyError> {
+        check_same_size("noise model shots", a, b)?;
+        let n = Self::BINS;
+        let mut samples: Vec<Vec<f64>> = vec![Vec::new(); n];
+        let mut used = 0usize;
+        let mut sum_sq = 0.0;
+        let dn = 1.0 / max_dn.max(1) as f64;
+        for (&x, &y) in a.data().iter().zip(b.data()) {
+            let (x, y) = (x as f64, y as f64);
+            if !(x.is_finite() && y.is_finite()) || x >= 1.0 - 0.5 * dn || y >= 1.0 - 0.5 * dn {
+                continue;
+            }
+            let mean = 0.5 * (x + y);
+            if mean <= 0.5 * dn {
+                continue; // black: clipped at zero, no usable noise either
+            }
+            let bin = ((mean * n as f64) as usize).min(n - 1);
+            let d = x - y;
+            samples[bin].push(0.5 * d * d);
+            sum_sq += d * d;
+            used += 1;
+        }
+        if used < Self::MIN_BIN_SAMPLES {
+            return Err(UncertaintyError::TooFewNoiseSamples { pixels: used });
+        }
+        let rms = (sum_sq / used as f64).sqrt();
+        if rms > 0.2 {
+            return Err(UncertaintyError::ShotsDiffer { rms });
+        }
+        let floor_variance = dn * dn / 12.0;
+        let mut estimate: Vec<Option<f64>> = samples
+            .iter_mut()
+            .map(|s| {
+                if s.len() < Self::MIN_BIN_SAMPLES {
+                    return None;
+                }
+                s.sort_by(f64::total_cmp);
+                let cap = 25.0 * s[s.len() / 2].max(floor_variance);
+                let kept: Vec<f64> = s.iter().copied().filter(|&v| v <= cap).collect();
+                Some((kept.iter().sum::<f64>() / kept.len() as f64).max(floor_variance))
+            })
+            .collect();
+        // Empty bins take the nearest filled bin's value (constant extrapolation).
+        let filled: Vec<usize> = (0..n).filter(|&k| estimate[k].is_some()).collect();
+        if filled.is_empty() {
+            return Err(UncertaintyError::TooFewNoiseSamples { pixels: used });
+        }
+        for k in 0..n {
+            if estimate[k].is_none() {
+                let nearest = *filled
+                    .iter()
+                    .min_by_key(|&&f| f.abs_diff(k))
+                    .expect("non-empty");
+                estimate[k] = estimate[nearest];
+            }
+        }
+        Ok(Self {
+            variance_by_bin: estimate.into_iter().map(|v| v.expect("filled")).collect(),
+            floor_variance,
+        })
+    }
+
+    /// σ_I² at normalised intensity `i`, (full scale)².
+    #[inline]
+    pub fn variance(&self, i: f32) -> f64 {
+        let n = self.variance_by_bin.len();
+        let x = (i.clamp(0.0, 1.0) as f64) * n as f64 - 0.5;
+        let k = (x.floor().max(0.0) as usize).min(n.saturating_sub(2));
+        let t = (x - k as f64).clamp(0.0, 1.0);
+        let v = if n < 2 {
+            self.variance_by_bin[0]
+        } else {
+            self.variance_by_bin[k] * (1.0 - t) + self.variance_by_bin[k + 1] * t
+        };
+        v.max(self.floor_variance)
+    }
+}
+
+fn check_same_size<T: Copy, U: Copy>(
+    what: &'static str,
+    a: &Image<T>,
+    b: &Image<U>,
+) -> Result<(), UncertaintyError> {
+    if a.width() != b.width() || a.height() != b.height() {
+        return Err(UncertaintyError::SizeMismatch {
+            what,
+            a_w: a.width(),
+            a_h: a.height(),
+            b_w: b.width(),
+            b_h: b.height(),
+        });
+    }
+    Ok(())
+}
+
+/// Per-pixel Fisher information of the disparity from one image, `Σ_window (∂I/∂u)² / σ_e²`
+/// (eq 2–3), as a summed-area table so any window costs O(1).
+fn disparity_information_table(image: &Image<f32>, noise: &NoiseModel) -> SummedAreaTable {
+    let (w, h) = (image.width() as usize, image.height() as usize);
+    let data = image.data();
+    SummedAreaTable::from_fn(w, h, |u, v| {
+        if u == 0 || u + 1 >= w {
+            return 0.0;
+        }
+        let row = &data[v * w..(v + 1) * w];
+        let gradient = 0.5 * (row[u + 1] as f64 - row[u - 1] as f64);
+        gradient * gradient / (2.0 * noise.variance(row[u]))
+    })
+}
+
+/// σ_z (metres) of each pixel of `depth` (the left camera's, matched from `left` and `right`
+/// with a `(2r + 1)²` window, `r = window_radius_px`), by eq 1–5; NaN where depth is missing
+/// or a window leaves the image. A window without gradient gives +∞ (no information).
+pub fn depth_sigma(
+    left: &Image<f32>,
+    right: &Image<f32>,
+    depth: &DepthMap,
+    rig: &StereoRig,
+    noise: &NoiseModel,
+    window_radius_px: u32,
+) -> Result<Image<f32>, UncertaintyError> {
+    check_same_size("left and right images", left, right)?;
+    check_same_size("left image and depth map", left, &depth.depth_m)?;
+    let info_left = disparity_information_table(left, noise);
+    let info_right = disparity_information_table(right, noise);
+    let (w, h) = (left.width(), left.height());
+    let r = window_radius_px as i64;
+    let window = |table: &SummedAreaTable, u: i64, v: i64| -> Option<f64> {
+        (u - r >= 0 && v - r >= 0 && u + r < w as i64 && v + r < h as i64).then(|| {
+            table.sum(
+                (u - r) as usize,
+                (v - r) as usize,
+                (u + r + 1) as usize,
+                (v + r + 1) as usize,
+            )
+        })
+    };
+    let mut sigma = Image::filled(w, h, f32::NAN).expect("non-zero size");
+    for v in 0..h {
+        for u in 0..w {
+            let Some(z) = depth.get(u, v) else { continue };
+            let d = rig.disparity_from_depth(z as f64);
+            let (ui, vi) = (u as i64, v as i64);
+            let Some(fisher_left) = window(&info_left, ui, vi) else {
+                continue;
+            };
+            // The right window is centred on u_R = u − d (pixel-centre coordinates cancel);
+            // between whole-pixel windows the information is interpolated linearly.
+            let u_right = u as f64 - d;
+            let (u0, t) = (u_right.floor() as i64, u_right - u_right.floor());
+            let (Some(f0), Some(f1)) =
+                (window(&info_right, u0, vi), window(&info_right, u0 + 1, vi))
+            else {
+                continue;
+            };
+            let fisher_right = f0 * (1.0 - t) + f1 * t;
+            let fisher = fisher_left.min(fisher_right); // eq 5: the larger variance wins
+            let f = rig.depth_per_disparity(d); // eq 4
+            sigma.set(u, v, (f.abs() / fisher.sqrt()) as f32);
+        }
+    }
+    Ok(sigma)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    fn rig() -> StereoRig {
+        StereoRig::ensenso_n35()
+    }
+
+    #[test]
+    fn noise_model_recovers_signal_dependent_variance() {
+        // σ² = a + b·I (read + shot noise), sampled on a ramp image.
+        let (a, b) = (1e-5, 4e-4);
+        let (w, h) = (256u32, 200u32);
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+        let clean: Vec<f32> = (0..w * h)
+            .map(|i| (i % w) as f32 / w as f32 * 0.95)
+            .collect();
+        let mut shot = || -> Image<f32> {
+            let data = clean
+                .iter()
+                .map(|&i| {
+                    let s = (a + b * i as f64).sqrt();
+                    (i as f64 + Normal::new(0.0, s).unwrap().sample(&mut rng)) as f32
+                })
+                .collect();
+            Image::new(w, h, data).unwrap()
+        };
+        let (x, y) = (shot(), shot());
+        let model = NoiseModel::fit_from_pair(&x, &y, 65535).unwrap();
+        for i in [0.1f32, 0.3, 0.5, 0.8] {
+            let truth = a + b * i as f64;
+            // Each bin holds ~1600 samples of a χ²₁-like variable: relative σ ≈ √(2/1600) = 3.5 %;
+            // bins are 1/32 wide, so interpolation is exact for a linear law. 5σ: 18 %.
+            let rel = (model.variance(i) - truth).abs() / truth;
+            assert!(rel < 0.18, "I = {i}: {} vs {truth}", model.variance(i));
+        }
+    }
+
+    #[test]
+    fn noise_model_rejects_bad_shots() {
+        let a = Image::filled(10, 10, 0.5f32).unwrap();
+        let b = Image::filled(10, 11, 0.5f32).unwrap();
+        assert!(matches!(
+            NoiseModel::fit_from_pair(&a, &b, 255),
+            Err(UncertaintyError::SizeMismatch { .. })
+        ));
+        let saturated = Image::filled(100, 100, 1.0f32).unwrap();
+        assert!(matches!(
+            NoiseModel::fit_from_pair(&saturated, &saturated, 255),
+            Err(UncertaintyError::TooFewNoiseSamples { .. })
+        ));
+        let moved = Image::new(
+            100,
+            100,
+            (0..10_000).map(|i| (i % 2) as f32 * 0.9).collect(),
+        )
+        .unwrap();
+        let other = Image::new(
+            100,
+            100,
+            (0..10_000).map(|i| ((i + 1) % 2) as f32 * 0.9).collect(),
+        )
+        .unwrap();
+        assert!(matches!(
+            NoiseModel::fit_from_pair(&moved, &other, 255),
+            Err(UncertaintyError::ShotsDiffer { .. })
+        ));
+    }
+
+    /// A sinusoidal texture along x, `I = c + A sin(ω u)`, on a fronto-parallel plane: the
+    /// window information has a closed form, so σ_z can be checked exactly.
+    #[test]
+    fn sigma_z_matches_the_closed_form_on_a_sinusoid() {
+        let rig = rig();
+        // A whole-pixel disparity (≈ 0.6 m) so the right window needs no interpolation.
+        let d = 183.0;
+        let z = rig.depth_from_disparity(d);
+        let (w, h) = (400u32, 40u32);
+        let (c, amp, omega) = (0.5f64, 0.2f64, 0.7f64);
+        let left = Image::new(
+            w,
+            h,
+            (0..w * h)
+                .map(|i| (c + amp * (omega * (i % w) as f64).sin()) as f32)
+                .collect(),
+        )
+        .unwrap();
+        // The right image sees the same texture shifted by d.
+        let right = Image::new(
+            w,
+            h,
+            (0..w * h)
+                .map(|i| (c + amp * (omega * ((i % w) as f64 + d)).sin()) as f32)
+                .collect(),
+        )
+        .unwrap();
+        let depth = DepthMap::new(Image::filled(w, h, z as f32).unwrap());
+        let variance = 1e-4;
+        let noise = NoiseModel::constant(variance);
+        let r = 5u32;
+        let sigma = depth_sigma(&left, &right, &depth, &rig, &noise, r).unwrap();
+        // Central difference of a sinusoid: A sin(ω) cos(ω u); its square summed over a window
+        // of n = 2r+1 columns × n rows ≈ n² A² sin²ω / 2 (the cos² averages to ½ over many
+        // periods; with n = 11 and ω = 0.7 the window spans 1.2 periods, so compute it exactly
+        // at the probed pixel instead).
+        let (u, v) = (300u32, 20u32);
+        let n = (2 * r + 1) as f64;
+        let fisher = || -> f64 {
+            (0..2 * r + 1)
+                .map(|k| {
+                    let x = u as f64 - r as f64 + k as f64;
+                    let g = amp * omega.sin() * (omega * x).cos();
+                    g * g
+                })
+                .sum::<f64>()
+                * n
+                / (2.0 * variance)
+        };
+        // The right window centred on u − d sees the same texture phase as the left one.
+        let expected_fisher = fisher();
+        let f = rig.depth_per_disparity(d);
+        let expected = f.abs() / expected_fisher.sqrt();
+        let got = sigma.get(u, v).unwrap() as f64;
+        // Only f32 rounding of the images separates the two.
+        assert!(
+            (got - expected).abs() / expected < 1e-3,
+            "{got} vs {expected}"
+        );
+        // Border pixels whose window leaves the image have no value.
+        assert!(sigma.get(2, v).unwrap().is_nan());
+        // Doubling the noise variance scales σ_z by √2.
+        let noisier = depth_sigma(
+            &left,
+            &right,
+            &depth,
+            &rig,
+            &NoiseModel::constant(2.0 * variance),
+            r,
+        )
+        .unwrap();
+        let ratio = noisier.get(u, v).unwrap() as f64 / got;
+        assert!((ratio - 2f64.sqrt()).abs() < 1e-4, "{ratio}");
+    }
+
+    #[test]
+    fn sigma_z_grows_with_depth_squared_and_follows_the_weaker_image() {
+        let rig = rig();
+        let (w, h) = (600u32, 30u32);
+        let textured = Image::new(
+            w,
+            h,
+            (0..w * h)
+                .map(|i| 0.5 + 0.3 * ((i % w) as f32 * 1.3).sin())
+                .collect(),
+        )
+        .unwrap();
+        let noise = NoiseModel::constant(1e-4);
+        let at = |z: f64| {
+            let depth = DepthMap::new(Image::filled(w, h, z as f32).unwrap());
+            depth_sigma(&textured, &textured, &depth, &rig, &noise, 4).unwrap()
+        };
+        let (s1, s2) = (at(0.5), at(1.0));
+        // F = f·b/d² ∝ z², and the same texture gives the same information: ratio 4, up to
+        // the right window landing on another phase of the sinusoid (a few % on this texture).
+        let ratio = s2.get(500, 15).unwrap() / s1.get(500, 15).unwrap();
+        assert!((ratio - 4.0).abs() < 0.4, "{ratio}");
+        // A flat right image carries no information: σ_z is infinite (eq 5 keeps the worse).
+        let flat = Image::filled(w, h, 0.5f32).unwrap();
+        let depth = DepthMap::new(Image::filled(w, h, 0.5).unwrap());
+        let s = depth_sigma(&textured, &flat, &depth, &rig, &noise, 4).unwrap();
+        assert!(s.get(500, 15).unwrap().is_infinite());
+        // Missing depth stays missing.
+        let mut holes = Image::filled(w, h, 0.5f32).unwrap();
+        holes.set(500, 15, f32::NAN);
+        let s = depth_sigma(&textured, &textured, &DepthMap::new(holes), &rig, &noise, 4).unwrap();
+        assert!(s.get(500, 15).unwrap().is_nan());
+    }
+
+    #[test]
+    fn mismatched_sizes_are_errors() {
+        let a = Image::filled(10, 10, 0.5f32).unwrap();
+        let b = Image::filled(11, 10, 0.5f32).unwrap();
+        let depth = DepthMap::new(Image::filled(10, 10, 0.5f32).unwrap());
+        let noise = NoiseModel::constant(1e-4);
+        assert!(matches!(
+            depth_sigma(&a, &b, &depth, &rig(), &noise, 2),
+            Err(UncertaintyError::SizeMismatch {
+                what: "left and right images",
+                ..
+            })
+        ));
+    }
+}

@@ -88,6 +88,64 @@ impl<T: Copy> Image<T> {
     }
 }
 
+/// Digital numbers as intensities normalised to full scale, `dn / max_dn` in [0, 1]: the
+/// units the stereo matcher and the depth-uncertainty model (eq 1–5) work in.
+pub fn normalised_intensity(dn: &Image<u16>, max_dn: u16) -> Image<f32> {
+    let scale = 1.0 / max_dn.max(1) as f32;
+    Image {
+        width: dn.width,
+        height: dn.height,
+        data: dn.data.iter().map(|&d| d as f32 * scale).collect(),
+    }
+}
+
+/// A summed-area table of a `width × height` buffer: the sum over any pixel rectangle in O(1).
+/// Sums are `f64` so long rows of small values keep their precision.
+#[derive(Clone, Debug)]
+pub struct SummedAreaTable {
+    width: usize,
+    height: usize,
+    /// `(width + 1) × (height + 1)`, zero first row and column.
+    table: Vec<f64>,
+}
+
+impl SummedAreaTable {
+    /// The table of `value(u, v)` over a `width × height` grid.
+    pub fn from_fn(
+        width: usize,
+        height: usize,
+        mut value: impl FnMut(usize, usize) -> f64,
+    ) -> Self {
+        let stride = width + 1;
+        let mut table = vec![0.0f64; stride * (height + 1)];
+        for v in 0..height {
+            let mut row = 0.0f64;
+            for u in 0..width {
+                row += value(u, v);
+                let i = (v + 1) * stride + u + 1;
+                table[i] = table[i - stride] + row;
+            }
+        }
+        Self {
+            width,
+            height,
+            table,
+        }
+    }
+
+    /// Σ over columns `u0..u1`, rows `v0..v1` (half-open), clipped to the grid.
+    #[inline]
+    pub fn sum(&self, u0: usize, v0: usize, u1: usize, v1: usize) -> f64 {
+        let (u1, v1) = (u1.min(self.width), v1.min(self.height));
+        if u0 >= u1 || v0 >= v1 {
+            return 0.0;
+        }
+        let s = self.width + 1;
+        self.table[v1 * s + u1] - self.table[v0 * s + u1] - self.table[v1 * s + u0]
+            + self.table[v0 * s + u0]
+    }
+}
+
 /// A depth map in metres along the optical axis (z, not ray length); NaN where depth is missing.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DepthMap {
@@ -143,6 +201,22 @@ mod tests {
         assert_eq!(img.get(3, 1), Some(2.5));
         assert_eq!(img.get(4, 1), None);
         assert_eq!(img.row(1), &[0.0, 0.0, 0.0, 2.5]);
+    }
+
+    #[test]
+    fn summed_area_table_sums_rectangles() {
+        let sat = SummedAreaTable::from_fn(5, 4, |u, v| (u + 10 * v) as f64);
+        let brute = |u0: usize, v0: usize, u1: usize, v1: usize| -> f64 {
+            (v0..v1)
+                .flat_map(|v| (u0..u1).map(move |u| (u + 10 * v) as f64))
+                .sum()
+        };
+        assert_eq!(sat.sum(0, 0, 5, 4), brute(0, 0, 5, 4));
+        assert_eq!(sat.sum(1, 2, 4, 3), brute(1, 2, 4, 3));
+        assert_eq!(sat.sum(3, 1, 9, 9), brute(3, 1, 5, 4)); // clipped
+        assert_eq!(sat.sum(2, 2, 2, 4), 0.0);
+        let dn = Image::new(2, 1, vec![0u16, 255]).unwrap();
+        assert_eq!(normalised_intensity(&dn, 255).data(), &[0.0, 1.0]);
     }
 
     #[test]
