@@ -5,5 +5,6 @@ pub mod bin;
 pub mod capture;
 pub mod dataset;
 pub mod effects;
+pub mod exposure;
 pub mod materials;
 pub mod views;
