@@ -8,3 +8,4 @@ pub mod effects;
 pub mod exposure;
 pub mod materials;
 pub mod views;
+pub mod visibility;
