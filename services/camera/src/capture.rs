@@ -70,6 +70,9 @@ pub struct StereoCapture {
 pub enum CaptureError {
     #[error("stereo matching: {0}")]
     Stereo(#[from] StereoError),
+    /// The exposure times of an exposure stack are unusable.
+    #[error("exposure stack: {problem}")]
+    Exposures { problem: String },
 }
 
 /// A simulated structured-light camera looking at a fixed scene.

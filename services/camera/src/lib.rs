@@ -5,5 +5,7 @@ pub mod bin;
 pub mod capture;
 pub mod dataset;
 pub mod effects;
+pub mod exposure;
 pub mod materials;
 pub mod views;
+pub mod visibility;

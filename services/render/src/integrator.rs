@@ -13,7 +13,7 @@
 use glam::Vec3A;
 use glint_geometry::camera::PinholeIntrinsics;
 use glint_geometry::image::{Image, PixelRect};
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, Matrix3, Vector3};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
@@ -118,11 +118,7 @@ pub fn render(
                     } else {
                         (rng.random::<f32>(), rng.random::<f32>())
                     };
-                    let x = (u as f32 + ju - k.cx_px as f32) / k.fx_px as f32;
-                    let y = (v as f32 + jv - k.cy_px as f32) / k.fy_px as f32;
-                    let d_c = Vector3::new(x, y, 1.0).normalize();
-                    let d_w = rotation * d_c;
-                    let direction = Vec3A::new(d_w.x, d_w.y, d_w.z);
+                    let (d_c, direction) = pixel_ray(k, &rotation, u, v as u32, ju, jv);
                     let path = trace(
                         scene,
                         projector,
@@ -151,6 +147,66 @@ pub fn render(
         label: Image::new(w, h, label).expect("sized from the intrinsics"),
         rays_traced,
     }
+}
+
+/// The ray through continuous pixel position `(u + ju, v + jv)`: its unit direction in the
+/// camera frame and in the world (`rotation` = camera → world).
+#[inline]
+fn pixel_ray(
+    k: &PinholeIntrinsics,
+    rotation: &Matrix3<f32>,
+    u: u32,
+    v: u32,
+    ju: f32,
+    jv: f32,
+) -> (Vector3<f32>, Vec3A) {
+    let x = (u as f32 + ju - k.cx_px as f32) / k.fx_px as f32;
+    let y = (v as f32 + jv - k.cy_px as f32) / k.fy_px as f32;
+    let d_c = Vector3::new(x, y, 1.0).normalize();
+    let d_w = rotation * d_c;
+    (d_c, Vec3A::new(d_w.x, d_w.y, d_w.z))
+}
+
+/// The label of the first surface through each pixel centre (0 where nothing is hit): primary
+/// rays only, no shading. With `only_instance`, every other instance is transparent, which
+/// gives that instance's whole (amodal) silhouette. Pixels outside `roi` stay 0.
+pub fn render_labels(
+    scene: &Scene,
+    camera: &Camera,
+    roi: Option<PixelRect>,
+    only_instance: Option<u32>,
+) -> Image<u16> {
+    let k = &camera.intrinsics;
+    let (w, h) = (k.width_px, k.height_px);
+    let mut label = vec![0u16; (w * h) as usize];
+    let Some(roi) = roi.map_or(Some(PixelRect::full(w, h)), |r| r.clipped_to(w, h)) else {
+        return Image::new(w, h, label).expect("sized from the intrinsics");
+    };
+    let rotation = camera
+        .t_w_c
+        .rotation
+        .to_rotation_matrix()
+        .matrix()
+        .cast::<f32>();
+    let origin = camera.t_w_c.translation.vector.cast::<f32>();
+    let origin = Vec3A::new(origin.x, origin.y, origin.z);
+    label
+        .par_chunks_mut(w as usize)
+        .enumerate()
+        .filter(|(v, _)| (roi.v_min..roi.v_min + roi.height).contains(&(*v as u32)))
+        .for_each(|(v, row)| {
+            for u in roi.u_min..roi.u_min + roi.width {
+                let (_, direction) = pixel_ray(k, &rotation, u, v as u32, 0.5, 0.5);
+                let hit = match only_instance {
+                    None => scene.intersect(origin, direction, f32::INFINITY),
+                    Some(i) => scene.intersect_instance(origin, direction, f32::INFINITY, i),
+                };
+                if let Some(hit) = hit {
+                    row[u as usize] = scene.instances()[hit.instance as usize].label;
+                }
+            }
+        });
+    Image::new(w, h, label).expect("sized from the intrinsics")
 }
 
 struct PathResult {

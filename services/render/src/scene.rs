@@ -77,6 +77,8 @@ pub struct Scene {
     instance_of: Vec<u32>,
     instances: Vec<SceneInstance>,
     materials: Vec<PrincipledParams<f32>>,
+    /// World-space bounds of each instance, same order as `instances`.
+    instance_bounds: Vec<(Vec3A, Vec3A)>,
 }
 
 /// Offset that lifts secondary-ray origins off the surface, metres: far above f32 rounding of
@@ -146,7 +148,16 @@ impl Scene {
             .map(|&k| owner[k as usize])
             .collect();
         let normals = triangles.iter().map(Triangle::compute_normal).collect();
+        let mut instance_bounds =
+            vec![(Vec3A::splat(f32::INFINITY), Vec3A::splat(f32::NEG_INFINITY)); instances.len()];
+        for (tri, &i) in world.iter().zip(&owner) {
+            let b = &mut instance_bounds[i as usize];
+            for p in [tri.v0, tri.v1, tri.v2] {
+                *b = (b.0.min(p), b.1.max(p));
+            }
+        }
         Ok(Self {
+            instance_bounds,
             bvh,
             triangles,
             normals,
@@ -159,12 +170,41 @@ impl Scene {
     /// The closest hit along `direction` (unit) from `origin` within `(0, t_max]`.
     #[inline]
     pub fn intersect(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+        self.closest_hit(origin, direction, t_max, |_| true)
+    }
+
+    /// The closest hit on instance `instance` alone (every other instance is transparent):
+    /// the ray query behind amodal masks.
+    #[inline]
+    pub fn intersect_instance(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+        instance: u32,
+    ) -> Option<Hit> {
+        self.closest_hit(origin, direction, t_max, |i| i == instance)
+    }
+
+    /// The closest hit on a triangle whose instance `accept`s.
+    #[inline]
+    fn closest_hit(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+        accept: impl Fn(u32) -> bool,
+    ) -> Option<Hit> {
         let ray = Ray::new(origin, direction, 0.0, t_max);
         let mut hit = RayHit::none();
-        if !self
-            .bvh
-            .ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray))
-        {
+        let found = self.bvh.ray_traverse(ray, &mut hit, |ray, id| {
+            if accept(self.instance_of[id]) {
+                self.triangles[id].intersect(ray)
+            } else {
+                f32::INFINITY
+            }
+        });
+        if !found {
             return None;
         }
         let id = hit.primitive_id as usize;
@@ -175,6 +215,11 @@ impl Scene {
             normal: if n.dot(direction) > 0.0 { -n } else { n },
             instance: self.instance_of[id],
         })
+    }
+
+    /// World-space axis-aligned bounds `(min, max)` of instance `instance`'s triangles.
+    pub fn instance_bounds(&self, instance: u32) -> Option<(Vec3A, Vec3A)> {
+        self.instance_bounds.get(instance as usize).copied()
     }
 
     /// Whether anything blocks the segment from `origin` along `direction` (unit) up to `distance`.

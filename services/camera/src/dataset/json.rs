@@ -120,6 +120,13 @@ impl<'a> JsonNode<'a> {
         }
     }
 
+    /// A string.
+    pub(crate) fn str(&self) -> Result<&'a str, DatasetError> {
+        self.value
+            .as_str()
+            .ok_or_else(|| self.error(format!("expected a string, found {}", describe(self.value))))
+    }
+
     /// A whole number in `T`'s range; `3.0` counts as whole.
     pub(crate) fn integer<T: TryFrom<i64>>(&self) -> Result<T, DatasetError> {
         let whole = match self.value {

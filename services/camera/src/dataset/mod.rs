@@ -15,10 +15,13 @@
 
 pub mod bop;
 mod error;
+pub mod exposure_stack;
 mod image_files;
 mod json;
+pub mod rig_file;
 pub mod robi;
 pub mod transforms;
 
 pub use error::DatasetError;
+pub use exposure_stack::{ExposureStackFiles, write_exposure_stack};
 pub use image_files::{PatternImage, StereoSide, depth_from_units, depth_to_units};

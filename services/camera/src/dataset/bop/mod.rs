@@ -18,8 +18,9 @@
 //! `scene_camera_xyz.json`, `gray_xyz/`, `mask_visib_xyz/`, ... ([`BopSceneLayout::for_sensor`]).
 //!
 //! Glint's captures add `glint/pattern_left/XXXXXX.png`, `glint/pattern_right/XXXXXX.png`
-//! (8- or 16-bit structured-light images) and `glint/gt_materials.json` (free-form, from the
-//! caller). BOP tools ignore the `glint/` directory.
+//! (8- or 16-bit structured-light images), `glint/gt_materials.json` (free-form, from the
+//! caller), and for calibration `glint/exposure_stack/XXXXXX/`, `glint/rig.json` and
+//! `glint/gt_sensor.json`. BOP tools ignore the `glint/` directory.
 //!
 //! **Pixel convention.** BOP's `cam_K` is OpenCV's: pixel centres at integer coordinates.
 //! Glint puts pixel `(u, v)`'s centre at `(u + 0.5, v + 0.5)`, so
@@ -148,6 +149,22 @@ impl BopSceneLayout {
     /// `glint/gt_materials.json`.
     pub fn gt_materials_json(&self) -> PathBuf {
         self.glint_dir().join("gt_materials.json")
+    }
+    /// `glint/exposure_stack/XXXXXX/`: image `im_id`'s white-pattern exposure stack
+    /// ([`crate::dataset::exposure_stack`]).
+    pub fn exposure_stack_dir(&self, im_id: u32) -> PathBuf {
+        self.glint_dir()
+            .join("exposure_stack")
+            .join(format!("{im_id:06}"))
+    }
+    /// `glint/rig.json`: the SLI rig as calibration-known hardware
+    /// ([`crate::dataset::rig_file`]).
+    pub fn rig_json(&self) -> PathBuf {
+        self.glint_dir().join("rig.json")
+    }
+    /// `glint/gt_sensor.json`: the simulator's sensor, for evaluation only.
+    pub fn gt_sensor_json(&self) -> PathBuf {
+        self.glint_dir().join("gt_sensor.json")
     }
 }
 
