@@ -9,6 +9,7 @@
 //! Conventions are the geometry crate's: metres, `t_a_b` maps b → a, left perturbations
 //! `T ← exp(δ)·T` with δ = (ρ, φ). Nothing here reads ground truth.
 
+pub mod icp;
 pub mod points;
 pub mod refine;
 pub mod uncertainty;
