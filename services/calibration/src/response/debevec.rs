@@ -158,11 +158,12 @@ fn local_range(img: &Image<u16>, u: u32, v: u32) -> u32 {
     for dv in -1i64..=1 {
         for du in -1i64..=1 {
             let (x, y) = (u as i64 + du, v as i64 + dv);
-            if x >= 0 && y >= 0 {
-                if let Some(d) = img.get(x as u32, y as u32) {
-                    lo = lo.min(d);
-                    hi = hi.max(d);
-                }
+            if x >= 0
+                && y >= 0
+                && let Some(d) = img.get(x as u32, y as u32)
+            {
+                lo = lo.min(d);
+                hi = hi.max(d);
             }
         }
     }
