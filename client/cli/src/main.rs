@@ -3,6 +3,7 @@
 //! With no arguments it runs the main job, [`demo`], on embedded defaults.
 
 mod bench;
+mod calibrate_cmd;
 mod capture_cmd;
 mod demo;
 mod mesh_cmd;
@@ -33,6 +34,9 @@ enum Command {
     /// Mesh tools: export a part, inspect a mesh file.
     #[command(subcommand)]
     Mesh(mesh_cmd::MeshCommand),
+    /// Photometric calibration: camera response (Debevec–Malik).
+    #[command(subcommand)]
+    Calibrate(calibrate_cmd::CalibrateCommand),
     /// Benchmarks that print tables (and write CSV with --csv).
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -54,6 +58,7 @@ fn main() -> std::process::ExitCode {
         Some(Command::Capture(args)) => capture_cmd::run(&args),
         Some(Command::Mesh(cmd)) => mesh_cmd::run(cmd),
         Some(Command::Bench(cmd)) => bench::run(cmd),
+        Some(Command::Calibrate(cmd)) => calibrate_cmd::run(cmd),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
