@@ -6,6 +6,7 @@ mod bench;
 mod calibrate_cmd;
 mod capture_cmd;
 mod demo;
+mod eval;
 mod mesh_cmd;
 mod preview;
 mod progress;
@@ -31,6 +32,9 @@ enum Command {
     Demo(demo::DemoArgs),
     /// Mock SLI camera: a bin of one part captured from several views.
     Capture(capture_cmd::CaptureArgs),
+    /// The paper's experiments: Table I (refinement), Fig. 3 (depth uncertainty).
+    #[command(subcommand)]
+    Eval(eval::EvalCommand),
     /// Mesh tools: export a part, inspect a mesh file.
     #[command(subcommand)]
     Mesh(mesh_cmd::MeshCommand),
@@ -56,6 +60,7 @@ fn main() -> std::process::ExitCode {
         }),
         Some(Command::Demo(args)) => demo::run(&args),
         Some(Command::Capture(args)) => capture_cmd::run(&args),
+        Some(Command::Eval(cmd)) => eval::run(cmd),
         Some(Command::Mesh(cmd)) => mesh_cmd::run(cmd),
         Some(Command::Bench(cmd)) => bench::run(cmd),
         Some(Command::Calibrate(cmd)) => calibrate_cmd::run(cmd),

@@ -122,7 +122,20 @@ impl MockSliCamera<'_> {
         t_w_c: &Isometry3<f64>,
         seed: u64,
     ) -> Result<StereoCapture, CaptureError> {
-        let [left_render, right_render] = self.render_pair(t_w_c, self.pattern(), seed);
+        let renders = self.render_pair(t_w_c, self.pattern(), seed);
+        self.capture_rendered(t_w_c, renders, seed)
+    }
+
+    /// The sensor read-out and matching half of [`Self::capture`], on radiance already
+    /// rendered with [`Self::render_pair`] for the pattern: repeated captures of a static
+    /// scene differ only in sensor noise, so they can share one render (the radiance of a
+    /// static scene does not change between shots).
+    pub fn capture_rendered(
+        &self,
+        t_w_c: &Isometry3<f64>,
+        [left_render, right_render]: [glint_render::integrator::RenderOutput; 2],
+        seed: u64,
+    ) -> Result<StereoCapture, CaptureError> {
         let sensor = &self.config.sensor;
         let left = sensor.read_out(&left_render.radiance, seed.wrapping_add(1));
         let right = sensor.read_out(&right_render.radiance, seed.wrapping_add(2));

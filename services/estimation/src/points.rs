@@ -1,7 +1,7 @@
 //! Depth pixels of an object → world-frame points with their depth uncertainty (eq 6–7).
 
 use glint_geometry::camera::PinholeIntrinsics;
-use glint_geometry::image::{DepthMap, Image};
+use glint_geometry::image::{DepthMap, Image, SummedAreaTable};
 use nalgebra::{Isometry3, Point3, Vector3};
 
 /// One depth measurement of the object, in the world frame.
@@ -81,10 +81,62 @@ pub fn object_points(
     counts
 }
 
+/// The pixels of a `width × height` mask whose whole `(2r + 1)²` window lies inside it, `r =
+/// radius_px`. A stereo matcher's window that straddles a silhouette mixes the object with
+/// whatever is behind it and may report the background's depth for an object pixel ("edge
+/// fattening"); the interior's depth comes from the object alone.
+pub fn interior_mask(
+    width: u32,
+    height: u32,
+    radius_px: u32,
+    mask: impl Fn(u32, u32) -> bool,
+) -> Image<bool> {
+    let sat = SummedAreaTable::from_fn(width as usize, height as usize, |u, v| {
+        f64::from(u8::from(mask(u as u32, v as u32)))
+    });
+    let r = radius_px as i64;
+    let full = ((2 * r + 1) * (2 * r + 1)) as f64;
+    let data = (0..height as i64)
+        .flat_map(|v| (0..width as i64).map(move |u| (u, v)))
+        .map(|(u, v)| {
+            u - r >= 0
+                && v - r >= 0
+                && u + r < width as i64
+                && v + r < height as i64
+                && sat.sum(
+                    (u - r) as usize,
+                    (v - r) as usize,
+                    (u + r + 1) as usize,
+                    (v + r + 1) as usize,
+                ) == full
+        })
+        .collect();
+    Image::new(width, height, data).expect("width × height samples")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion};
+
+    #[test]
+    fn interior_keeps_pixels_whose_window_is_inside() {
+        // A 7×5 block at (2, 1) in a 12×8 image; radius 1 leaves its 5×3 interior.
+        let inside = |u: u32, v: u32| (2..9).contains(&u) && (1..6).contains(&v);
+        let interior = interior_mask(12, 8, 1, inside);
+        let kept: Vec<(u32, u32)> = (0..8)
+            .flat_map(|v| (0..12).map(move |u| (u, v)))
+            .filter(|&(u, v)| interior.get(u, v).unwrap())
+            .collect();
+        assert_eq!(kept.len(), 15);
+        assert!(
+            kept.iter()
+                .all(|&(u, v)| (3..8).contains(&u) && (2..5).contains(&v))
+        );
+        // Radius 0 is the mask itself.
+        let same = interior_mask(12, 8, 0, inside);
+        assert_eq!(same.data().iter().filter(|&&b| b).count(), 35);
+    }
 
     #[test]
     fn points_are_back_projected_into_the_world() {

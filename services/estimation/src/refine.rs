@@ -26,12 +26,19 @@ use crate::points::DepthPoint;
 /// How the refiner runs. Lengths in metres.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SdfRefineConfig {
-    /// Gauss–Newton/LM iterations at most.
+    /// Gauss–Newton/LM iterations at most, over all gate stages (each stage gets an equal
+    /// share, a stage that converges early leaves its rest to the next).
     pub max_iterations: usize,
-    /// Points with `|SDF| > gate_m` at the current pose are outliers (weight 0) for that
-    /// iteration. Default 10 mm, the SDF grid's default padding: beyond it the grid has no
-    /// information anyway.
+    /// Points with `|SDF| > gate` at the current pose are outliers (weight 0, constant cost
+    /// ρ(gate/σ)) for that iteration. The gate shrinks in stages (graduated
+    /// non-convexity): it starts at `gate_m` — default 10 mm, the SDF grid's default padding,
+    /// beyond which the grid has no information, and a third of the largest initial error —
+    /// and halves after each stage down to `final_gate_m`.
     pub gate_m: f64,
+    /// The last stage's gate. Default 2.5 mm (≈ 8σ of the model term): wrong depth several
+    /// mm off the part — the matcher's window straddling a silhouette and matching the floor —
+    /// stops pulling, while a pose within the 2 mm/2° test keeps its surface points inside.
+    pub final_gate_m: f64,
     /// Huber threshold on the whitened residual `r/σ`. Default 2: quadratic for residuals
     /// within 2σ, linear beyond (wrong depth — edge fattening, inter-reflections — pulls with
     /// a bounded force).
@@ -43,8 +50,8 @@ pub struct SdfRefineConfig {
     pub inlier_k: f64,
     /// Converged when the step is below this in translation (m) and in rotation (rad).
     pub step_tolerance: f64,
-    /// A pose that moves further than this from the initial one (translation, m) has
-    /// diverged. Default 50 mm: far beyond the 30 mm an initial pose may be off.
+    /// A pose whose object origin moves further than this in the world from the initial
+    /// one (m) has diverged. Default 50 mm: far beyond the 30 mm an initial pose may be off.
     pub max_translation_change_m: f64,
     /// Fewer inliers than this and the refinement fails. Default 12 (two per degree of freedom).
     pub min_inliers: usize,
@@ -55,6 +62,7 @@ impl Default for SdfRefineConfig {
         Self {
             max_iterations: 30,
             gate_m: 10e-3,
+            final_gate_m: 2.5e-3,
             huber_k: 2.0,
             model_sigma_m: 0.3e-3,
             inlier_k: 3.0,
@@ -84,7 +92,7 @@ pub struct RefineResult {
     pub t_o_w: Isometry3<f64>,
     pub status: RefineStatus,
     pub iterations: usize,
-    /// Σ ρ(r/σ) at the solution (Huber cost of the gated points).
+    /// Σ ρ(r/σ) at the solution (Huber cost, truncated at the final gate).
     pub final_cost: f64,
     /// Points with whitened residual within `inlier_k` at the solution.
     pub inliers: usize,
@@ -178,9 +186,11 @@ fn accumulate(
     points: &[DepthPoint],
     t_o_w: &Isometry3<f64>,
     config: &SdfRefineConfig,
+    gate_m: f64,
 ) -> Normal {
     const CHUNK: usize = 1024;
     let model_var = config.model_sigma_m * config.model_sigma_m;
+    let outlier_cost = huber(gate_m / config.model_sigma_m, config.huber_k).0;
     points
         .par_chunks(CHUNK)
         .map(|chunk| {
@@ -189,7 +199,11 @@ fn accumulate(
                 let p_o = t_o_w * point.p_w;
                 let s = sdf.sample(&p_o);
                 let r = s.distance_m;
-                if !s.inside_grid || r.abs() > config.gate_m {
+                if !s.inside_grid || r.abs() > gate_m {
+                    // Truncated cost: an outlier costs what a residual at the gate would with
+                    // the smallest σ any point can have (σ_model), at least as much as any
+                    // inlier costs, so pushing points out of the gate never pays.
+                    acc.cost += outlier_cost;
                     continue;
                 }
                 let n = s.gradient;
@@ -216,6 +230,17 @@ fn accumulate(
             acc
         })
         .reduce(Normal::zero, Normal::add)
+}
+
+/// The refiner's objective at `t_o_w` with the final gate: Σ ρ(r/σ), outliers at the
+/// truncation cost. Lets a caller compare poses the way the refiner does.
+pub fn robust_cost(
+    sdf: &SdfGrid,
+    points: &[DepthPoint],
+    t_o_w: &Isometry3<f64>,
+    config: &SdfRefineConfig,
+) -> f64 {
+    accumulate(sdf, points, t_o_w, config, config.final_gate_m).cost
 }
 
 /// The covariance of a Fisher information, if every direction is observed: eigenvalues below
@@ -267,7 +292,14 @@ pub fn refine_sdf(
     }
 
     let mut t_o_w = *t_o_w_initial;
-    let mut normal = accumulate(sdf, points, &t_o_w, config);
+    let mut gates = vec![config.gate_m];
+    while let Some(&g) = gates.last() {
+        if g <= config.final_gate_m {
+            break;
+        }
+        gates.push((g * 0.5).max(config.final_gate_m));
+    }
+    let mut normal = accumulate(sdf, points, &t_o_w, config, gates[0]);
     if normal.gated < config.min_inliers {
         return Err(RefineError::TooFewInliers {
             inliers: normal.gated,
@@ -276,49 +308,65 @@ pub fn refine_sdf(
             needed: config.min_inliers,
         });
     }
-    let mut lambda = 1e-4;
     let mut status = RefineStatus::MaxIterations;
     let mut iterations = 0;
-    while iterations < config.max_iterations {
-        iterations += 1;
-        // Levenberg–Marquardt: damp the diagonal, retry with more damping until the robust
-        // cost drops (costs of different gated sets are compared as they are: a point leaving
-        // the gate costs at least ρ(gate) less, so the comparison is conservative).
-        let mut accepted = None;
-        for _ in 0..10 {
-            let mut damped = normal.h;
-            for i in 0..6 {
-                damped[(i, i)] += lambda * normal.h[(i, i)].max(1e-12);
+    'stages: for (stage, &gate) in gates.iter().enumerate() {
+        if stage > 0 {
+            normal = accumulate(sdf, points, &t_o_w, config, gate);
+            if normal.gated < config.min_inliers {
+                break; // the tighter gate leaves too little: keep the previous stage's pose
             }
-            let Some(step) = damped.cholesky().map(|c| -c.solve(&normal.g)) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let candidate = se3::perturb_left(&step, &t_o_w);
-            let trial = accumulate(sdf, points, &candidate, config);
-            if trial.gated >= config.min_inliers && trial.cost <= normal.cost {
-                accepted = Some((step, candidate, trial));
+        }
+        let budget = (config.max_iterations - iterations) / (gates.len() - stage);
+        let mut lambda = 1e-4;
+        status = RefineStatus::MaxIterations;
+        for _ in 0..budget.max(1) {
+            if iterations >= config.max_iterations {
                 break;
             }
-            lambda *= 10.0;
-        }
-        let Some((step, candidate, trial)) = accepted else {
-            status = RefineStatus::Converged; // no damped step lowers the cost: a minimum
-            break;
-        };
-        t_o_w = candidate;
-        normal = trial;
-        lambda = (lambda * 0.1).max(1e-7);
-        let moved = (t_o_w.translation.vector - t_o_w_initial.translation.vector).norm();
-        if moved > config.max_translation_change_m {
-            status = RefineStatus::Diverged;
-            break;
-        }
-        let small = step.fixed_rows::<3>(0).norm() < config.step_tolerance
-            && step.fixed_rows::<3>(3).norm() < config.step_tolerance;
-        if small {
-            status = RefineStatus::Converged;
-            break;
+            iterations += 1;
+            // Levenberg–Marquardt: damp the diagonal, retry with more damping until the
+            // truncated robust cost drops.
+            let mut accepted = None;
+            for _ in 0..10 {
+                let mut damped = normal.h;
+                for i in 0..6 {
+                    damped[(i, i)] += lambda * normal.h[(i, i)].max(1e-12);
+                }
+                let Some(step) = damped.cholesky().map(|c| -c.solve(&normal.g)) else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let candidate = se3::perturb_left(&step, &t_o_w);
+                let trial = accumulate(sdf, points, &candidate, config, gate);
+                if trial.gated >= config.min_inliers && trial.cost <= normal.cost {
+                    accepted = Some((step, candidate, trial));
+                    break;
+                }
+                lambda *= 10.0;
+            }
+            let Some((step, candidate, trial)) = accepted else {
+                status = RefineStatus::Converged; // no damped step lowers the cost: a minimum
+                break;
+            };
+            t_o_w = candidate;
+            normal = trial;
+            lambda = (lambda * 0.1).max(1e-7);
+            // How far the object moved in the world (t_o_w's own translation is the world
+            // origin seen from the object, which a small turn swings a long way).
+            let moved = (t_o_w.inverse().translation.vector
+                - t_o_w_initial.inverse().translation.vector)
+                .norm();
+            if moved > config.max_translation_change_m {
+                status = RefineStatus::Diverged;
+                break 'stages;
+            }
+            let small = step.fixed_rows::<3>(0).norm() < config.step_tolerance
+                && step.fixed_rows::<3>(3).norm() < config.step_tolerance;
+            if small {
+                status = RefineStatus::Converged;
+                break;
+            }
         }
     }
     let inliers = normal.inliers;

@@ -1,0 +1,309 @@
+//! Scenes for the experiments: mock-camera bins written as BOP scenes (cached on disk, so a
+//! rerun reads them back), and the reader that turns any BOP scene into per-view object
+//! points with their depth uncertainty.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
+use glint_camera::capture::{CaptureConfig, MockSliCamera};
+use glint_camera::dataset::bop::{BopSceneReader, BopSceneWriter, MaskKind, write_models};
+use glint_camera::dataset::rig_file::{read_rig_json, write_rig_json};
+use glint_camera::dataset::{PatternImage, StereoSide};
+use glint_camera::views;
+use glint_estimation::points::{DepthPoint, DepthSigma, interior_mask, object_points};
+use glint_estimation::uncertainty::{NoiseModel, depth_sigma};
+use glint_geometry::image::{Image, normalised_intensity};
+use glint_geometry::io::write_file_atomically;
+use glint_geometry::{Symmetry, TriMesh};
+use glint_render::bsdf::PrincipledParams;
+use glint_render::rig::SliRig;
+use glint_render::stereo::StereoMatcherConfig;
+use nalgebra::Isometry3;
+
+/// The object of an experiment: a mesh (metres, its own frame), its symmetry, and the
+/// ground-truth material the mock camera paints it with.
+#[derive(Clone, Debug)]
+pub struct EvalObject {
+    pub name: String,
+    pub mesh: TriMesh,
+    pub symmetry: Symmetry,
+    pub material: PrincipledParams<f32>,
+}
+
+/// How mock-camera scenes are made.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SceneSpec {
+    pub instances: u32,
+    pub views: u32,
+    pub width_px: u32,
+    pub height_px: u32,
+    pub spp: u32,
+}
+
+/// Working distance of the views, metres, and the cap's half-angle, degrees (like ROBI's).
+const VIEW_DISTANCE_M: f64 = 0.5;
+const VIEW_CAP_DEG: f64 = 35.0;
+pub const OBJ_ID: u32 = 1;
+/// The BOP scene holding one bin.
+const SCENE: &str = "000001";
+
+/// Two shots of view 0 for the noise model (photon transfer), next to the pattern images.
+fn noise_shot_path(reader_or_writer_glint_dir: &Path, shot: char) -> PathBuf {
+    reader_or_writer_glint_dir
+        .join("noise_shots")
+        .join(format!("{shot}.png"))
+}
+
+fn spec_path(dataset_dir: &Path) -> PathBuf {
+    dataset_dir.join("glint_scene_spec.json")
+}
+
+/// The BOP dataset directory of `object`'s bin with `seed` under `root`, generated unless a
+/// complete one with the same spec is already there. Returns the scene directory.
+pub fn ensure_scene(
+    root: &Path,
+    object: &EvalObject,
+    seed: u64,
+    spec: &SceneSpec,
+) -> anyhow::Result<PathBuf> {
+    let dataset = root.join(&object.name).join(format!("seed_{seed}"));
+    let scene_dir = dataset.join("test").join(SCENE);
+    let done = spec_path(&dataset);
+    if let Ok(text) = std::fs::read_to_string(&done)
+        && serde_json::from_str::<SceneSpec>(&text).ok().as_ref() == Some(spec)
+    {
+        return Ok(scene_dir);
+    }
+    generate(&dataset, &scene_dir, object, seed, spec)?;
+    write_file_atomically(&done, serde_json::to_string_pretty(spec)?.as_bytes())
+        .with_context(|| format!("writing {}", done.display()))?;
+    Ok(scene_dir)
+}
+
+fn generate(
+    dataset: &Path,
+    scene_dir: &Path,
+    object: &EvalObject,
+    seed: u64,
+    spec: &SceneSpec,
+) -> anyhow::Result<()> {
+    let rig = SliRig::ensenso_n35().resized(spec.width_px, spec.height_px)?;
+    let bin = BinSpec::default();
+    let poses = drop_parts(&object.mesh, spec.instances as usize, &bin, seed)?;
+    let scene = bin_scene(&object.mesh, &poses, object.material, &bin)?;
+    let camera = MockSliCamera {
+        rig,
+        scene: &scene,
+        config: CaptureConfig {
+            samples_per_pixel: spec.spp,
+            ..CaptureConfig::for_rig(&rig)?
+        },
+    };
+    let view_poses = views::spherical_cap(
+        spec.views as usize,
+        VIEW_DISTANCE_M,
+        VIEW_CAP_DEG,
+        bin.centre(),
+        rig.stereo.baseline_m,
+    );
+    write_models(
+        &dataset.join("models"),
+        &[(OBJ_ID, &object.mesh, &object.symmetry)],
+    )?;
+    let mut bop = BopSceneWriter::create(scene_dir, BopSceneWriter::DEFAULT_DEPTH_SCALE_MM)?;
+    let glint_dir = bop.layout().glint_dir();
+    std::fs::create_dir_all(glint_dir.join("noise_shots"))
+        .with_context(|| format!("creating {}", glint_dir.display()))?;
+    write_rig_json(&bop.layout().rig_json(), &rig)?;
+    let bar = crate::progress::bar(view_poses.len() as u64, &format!("{} {seed}", object.name));
+    for (k, t_w_c) in view_poses.iter().enumerate() {
+        let capture_seed = seed.wrapping_mul(1000).wrapping_add(k as u64);
+        let capture = camera.capture(t_w_c, capture_seed)?;
+        crate::capture_cmd::write_bop_image(&mut bop, k as u32, &capture, &camera, &poses, OBJ_ID)?;
+        if k == 0 {
+            // Two more read-outs of this view's pattern radiance: what a user does to measure
+            // the sensor noise (two shots of a static scene).
+            let [left, _] = camera.render_pair(t_w_c, camera.pattern(), capture_seed);
+            for (shot, s) in [('a', 11u64), ('b', 12u64)] {
+                let dn = camera
+                    .config
+                    .sensor
+                    .read_out(&left.radiance, capture_seed ^ s);
+                crate::capture_cmd::write_gray(
+                    &noise_shot_path(&glint_dir, shot),
+                    &dn,
+                    camera.config.sensor.max_dn(),
+                )?;
+            }
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    bop.finish()?;
+    Ok(())
+}
+
+/// One object instance seen in one view: its depth points (world frame) and ground truth.
+#[derive(Clone, Debug)]
+pub struct InstanceView {
+    /// Index into [`LoadedScene::instances`].
+    pub instance: usize,
+    /// Ground truth, evaluation only.
+    pub t_c_o_gt: Isometry3<f64>,
+    pub visib_fract: f64,
+    pub points: Vec<DepthPoint>,
+}
+
+/// One image of a scene.
+#[derive(Clone, Debug)]
+pub struct LoadedView {
+    pub im_id: u32,
+    /// Camera → world.
+    pub t_w_c: Isometry3<f64>,
+    pub objects: Vec<InstanceView>,
+}
+
+/// A static scene read back: its views, with instances numbered across views.
+#[derive(Clone, Debug)]
+pub struct LoadedScene {
+    pub views: Vec<LoadedView>,
+}
+
+/// Where σ_z comes from when a scene is read.
+#[derive(Clone, Copy, Debug)]
+pub enum SigmaSource {
+    /// From the pattern images (eq 1–5) with a noise model fitted to `glint/noise_shots`.
+    PatternImages,
+}
+
+fn pattern_as_normalised(image: PatternImage) -> (Image<f32>, u16) {
+    match image {
+        PatternImage::Bits8(img) => {
+            let dn = Image::new(
+                img.width(),
+                img.height(),
+                img.data().iter().map(|&v| v as u16).collect(),
+            )
+            .expect("same size");
+            (normalised_intensity(&dn, 255), 255)
+        }
+        PatternImage::Bits16(img) => (normalised_intensity(&img, u16::MAX), u16::MAX),
+    }
+}
+
+/// Reads a BOP scene (`obj_id` instances only): per view, each instance's masked depth as
+/// world points with σ_z (eq 1–7). Instances are identified across views by their world pose
+/// (the scene is static), so multi-view trials can stack one instance's points.
+///
+/// `erode_px`: only mask pixels whose `(2·erode_px + 1)²` window lies inside the mask give
+/// points (see [`interior_mask`]); 0 keeps the whole mask.
+pub fn load_scene(
+    scene_dir: &Path,
+    obj_id: u32,
+    sigma: SigmaSource,
+    erode_px: u32,
+) -> anyhow::Result<LoadedScene> {
+    let reader = BopSceneReader::open(scene_dir)?;
+    if !reader.has_gt() {
+        bail!(
+            "{}: the scene has no scene_gt.json; the experiment needs ground-truth poses",
+            scene_dir.display()
+        );
+    }
+    let layout = reader.layout().clone();
+    let rig_path = layout.rig_json();
+    let (noise, rig) = match sigma {
+        SigmaSource::PatternImages => {
+            let rig = read_rig_json(&rig_path)?;
+            let glint_dir = layout.glint_dir();
+            let shot = |c| -> anyhow::Result<Image<f32>> {
+                let path = noise_shot_path(&glint_dir, c);
+                let img = image::open(&path)
+                    .with_context(|| format!("reading noise shot {}", path.display()))?
+                    .to_luma8();
+                let dn = Image::new(
+                    img.width(),
+                    img.height(),
+                    img.as_raw().iter().map(|&v| v as u16).collect(),
+                )?;
+                Ok(normalised_intensity(&dn, 255))
+            };
+            let model = NoiseModel::fit_from_pair(&shot('a')?, &shot('b')?, 255)
+                .with_context(|| format!("noise model of {}", scene_dir.display()))?;
+            (model, rig)
+        }
+    };
+    let window_radius = StereoMatcherConfig::default().window_radius_px;
+    let mut views = Vec::new();
+    let mut instances_t_w_o: Vec<Isometry3<f64>> = Vec::new();
+    for im_id in reader.image_ids() {
+        let camera = reader.camera(im_id)?;
+        let Some(t_c_w) = camera.t_c_w else {
+            bail!(
+                "{}: image {im_id} has no camera pose (cam_R_w2c/cam_t_w2c); multi-view \
+                 refinement needs it",
+                scene_dir.display()
+            );
+        };
+        let t_w_c = t_c_w.inverse();
+        let depth = reader.depth(im_id)?;
+        let (left, _) = pattern_as_normalised(reader.pattern(im_id, StereoSide::Left)?);
+        let (right, _) = pattern_as_normalised(reader.pattern(im_id, StereoSide::Right)?);
+        let sigma_image = depth_sigma(&left, &right, &depth, &rig.stereo, &noise, window_radius)?;
+        let gts = reader.gt(im_id).unwrap_or(&[]).to_vec();
+        let infos = reader.gt_info(im_id).map(|i| i.to_vec());
+        let mut objects = Vec::new();
+        for (gt_index, gt) in gts.iter().enumerate() {
+            if gt.obj_id != obj_id {
+                continue;
+            }
+            let Some(info) = infos.as_ref().and_then(|i| i.get(gt_index)) else {
+                bail!(
+                    "{}: image {im_id} has no scene_gt_info.json entry for GT {gt_index}; the \
+                     experiment keeps instances by visib_fract",
+                    scene_dir.display()
+                );
+            };
+            let t_w_o = t_w_c * gt.t_c_o;
+            let instance = match instances_t_w_o.iter().position(|p| same_pose(p, &t_w_o)) {
+                Some(i) => i,
+                None => {
+                    instances_t_w_o.push(t_w_o);
+                    instances_t_w_o.len() - 1
+                }
+            };
+            let mask = reader.mask(im_id, gt_index, MaskKind::Visible)?;
+            let keep = interior_mask(mask.width(), mask.height(), erode_px, |u, v| {
+                mask.get(u, v).is_some_and(|m| m > 127)
+            });
+            let mut points = Vec::new();
+            object_points(
+                &depth,
+                |u, v| keep.get(u, v).unwrap_or(false),
+                DepthSigma::PerPixel(&sigma_image),
+                &camera.intrinsics,
+                &t_w_c,
+                &mut points,
+            );
+            objects.push(InstanceView {
+                instance,
+                t_c_o_gt: gt.t_c_o,
+                visib_fract: info.visib_fract,
+                points,
+            });
+        }
+        views.push(LoadedView {
+            im_id,
+            t_w_c,
+            objects,
+        });
+    }
+    Ok(LoadedScene { views })
+}
+
+/// The same world pose up to file rounding (BOP stores mm with ~6 digits): 0.1 mm and 0.01 rad.
+fn same_pose(a: &Isometry3<f64>, b: &Isometry3<f64>) -> bool {
+    (a.translation.vector - b.translation.vector).norm() < 1e-4
+        && (a.rotation.inverse() * b.rotation).angle() < 1e-2
+}
