@@ -41,7 +41,7 @@ pub struct CaptureArgs {
     pub out: PathBuf,
 }
 
-fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
+pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once('x')
         .ok_or_else(|| format!("resolution {s:?} must look like 1280x1024"))?;

@@ -6,6 +6,7 @@ mod bench;
 mod capture_cmd;
 mod demo;
 mod mesh_cmd;
+mod mitsuba_export;
 mod preview;
 mod progress;
 
