@@ -181,10 +181,43 @@ fn sample_checksum(grid: &SdfGrid, p: &Point3<f64>) -> f64 {
     s.distance_m + s.gradient.x
 }
 
-fn bench_render(part: Part, instances: u32, spp: u32) -> anyhow::Result<()> {
+/// The render bench's scene: `instances` of `part` dropped into the default bin (seed 1) with
+/// their ground-truth material, seen by `rig` from the first view of the spherical cap.
+struct BenchScene {
+    bin: glint_camera::bin::BinSpec,
+    mesh: glint_geometry::TriMesh,
+    poses: Vec<nalgebra::Isometry3<f64>>,
+    part_material: glint_render::bsdf::PrincipledParams<f32>,
+    scene: glint_render::scene::Scene,
+    /// Left camera → world.
+    t_w_c: nalgebra::Isometry3<f64>,
+}
+
+fn bench_scene(
+    part: Part,
+    instances: u32,
+    rig: &glint_render::rig::SliRig,
+) -> anyhow::Result<BenchScene> {
     use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
-    use glint_camera::capture::{CaptureConfig, MockSliCamera};
     use glint_camera::{materials, views};
+    let bin = BinSpec::default();
+    let mesh = part.mesh();
+    let poses = drop_parts(&mesh, instances as usize, &bin, 1)?;
+    let part_material = materials::ground_truth(part);
+    let scene = bin_scene(&mesh, &poses, part_material, &bin)?;
+    let t_w_c = views::spherical_cap(1, 0.6, 0.0, bin.centre(), rig.stereo.baseline_m)[0];
+    Ok(BenchScene {
+        bin,
+        mesh,
+        poses,
+        part_material,
+        scene,
+        t_w_c,
+    })
+}
+
+fn bench_render(part: Part, instances: u32, spp: u32) -> anyhow::Result<()> {
+    use glint_camera::capture::{CaptureConfig, MockSliCamera};
     use glint_render::integrator::{LightTransport, RenderSettings, render};
     use glint_render::rig::SliRig;
 
@@ -192,12 +225,8 @@ fn bench_render(part: Part, instances: u32, spp: u32) -> anyhow::Result<()> {
         instances >= 1 && spp >= 1,
         "--instances and --spp must be at least 1"
     );
-    let bin = BinSpec::default();
-    let mesh = part.mesh();
-    let poses = drop_parts(&mesh, instances as usize, &bin, 1)?;
-    let scene = bin_scene(&mesh, &poses, materials::ground_truth(part), &bin)?;
     let full = SliRig::ensenso_n35();
-    let t_w_c = views::spherical_cap(1, 0.6, 0.0, bin.centre(), full.stereo.baseline_m)[0];
+    let BenchScene { scene, t_w_c, .. } = bench_scene(part, instances, &full)?;
     let [camera, _] = full.cameras(&t_w_c);
     let projector = full.projector(
         &t_w_c,
@@ -268,8 +297,7 @@ fn export_render_scene(
     spp: u32,
 ) -> anyhow::Result<()> {
     use crate::mitsuba_export::{ExportShape, MitsubaExport};
-    use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
-    use glint_camera::{materials, views};
+    use glint_camera::materials;
     use glint_render::projector::Pattern;
     use glint_render::rig::SliRig;
 
@@ -277,13 +305,15 @@ fn export_render_scene(
         instances >= 1 && spp >= 1,
         "--instances and --export-spp must be at least 1"
     );
-    let bin = BinSpec::default();
-    let mesh = part.mesh();
-    let poses = drop_parts(&mesh, instances as usize, &bin, 1)?;
-    let part_material = materials::ground_truth(part);
-    let scene = bin_scene(&mesh, &poses, part_material, &bin)?;
     let rig = SliRig::ensenso_n35().resized(width, height)?;
-    let t_w_c = views::spherical_cap(1, 0.6, 0.0, bin.centre(), rig.stereo.baseline_m)[0];
+    let BenchScene {
+        bin,
+        mesh,
+        poses,
+        part_material,
+        scene,
+        t_w_c,
+    } = bench_scene(part, instances, &rig)?;
     let [camera, _] = rig.cameras(&t_w_c);
     let projector = rig.projector(&t_w_c, Pattern::White);
     let mut shapes: Vec<ExportShape> = poses
