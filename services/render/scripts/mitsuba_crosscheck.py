@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Cross-check Glint's renderer against Mitsuba 3 on the same scene.
 
-    glint bench render --mitsuba-export DIR [--part chrome-screw] [--export-spp 16]
+    glint bench render --mitsuba-export DIR [--part chrome-screw] [--export-spp 64]
     python3 services/render/scripts/mitsuba_crosscheck.py DIR [--variant llvm_ad_mono]
 
 Loads DIR/scene.json (see client/cli/src/mitsuba_export.rs), renders it with Mitsuba's `path`
@@ -9,15 +9,19 @@ integrator at the same samples per pixel as Glint — max_depth 2 for single-pat
 only) and max_bounces + 1 for multi-path — and prints, per light transport and for the parts, the
 bin and all signal pixels:
 
-- `sum ratio − 1`: Σ Mitsuba / Σ Glint − 1 over the signal pixels (energy bias), and the same
-  with both images clamped at the 99th percentile of their pixels: shiny parts under a point
-  light make heavy-tailed pixel estimates (highlights, caustic paths), whose plain sums swing by
-  ±15 % from seed to seed at 64 spp; clamping the top 1 % shows whether the bulk agrees;
-- `mean |rel|`, `median |rel|`: per-pixel |M − G| / G over the signal pixels;
-- `noise floor`: the same statistics between two Mitsuba renders with different seeds (still
-  divided by Glint's radiance), i.e. what Monte Carlo noise alone gives: a Glint-vs-Mitsuba
-  figure near it means agreement up to noise;
-- the time ratio Glint / Mitsuba (Glint's wall time from the export, same thread count).
+- `ΣM/ΣG − 1`: Σ Mitsuba / Σ Glint − 1 over the signal pixels (energy bias), Mitsuba averaged
+  over `--seeds` renders; beside it the range of the same figure for each seed alone, and its
+  mean over seeds with both images clamped at the 99th percentile of their pixels. Shiny
+  parts under a point light give heavy-tailed pixel estimates (highlights, caustic paths) whose
+  plain sums swing by ±15 % from seed to seed at 64 spp; the range and the clamp show whether a
+  difference is more than that;
+- `mean abs rel, median`: per-pixel |M − G| / G over the signal pixels, Mitsuba's first seed;
+- `noise floor`: the same per-pixel statistics between Mitsuba's first two seeds (still divided
+  by Glint's radiance), i.e. what Monte Carlo noise alone gives: a Glint-vs-Mitsuba figure near
+  it means agreement up to noise;
+- times: Glint's wall time from the export; Mitsuba's fastest warm render and, in brackets, the
+  first (cold, with JIT compilation for llvm variants) one; the ratio Glint / Mitsuba (warm),
+  both at Glint's thread count.
 
 Signal pixels: Glint radiance above 1 % of its 99th percentile over the image (and a surface
 hit through the pixel centre).
@@ -55,7 +59,8 @@ def parse_args():
         default=None,
         help="Mitsuba variant (default: llvm_ad_mono when libLLVM loads, else scalar_rgb)",
     )
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--seed", type=int, default=1, help="first Mitsuba seed")
+    p.add_argument("--seeds", type=int, default=4, help="Mitsuba renders per transport (≥ 2)")
     return p.parse_args()
 
 
@@ -215,6 +220,8 @@ def rel_stats(a, b, glint, mask):
 
 def main():
     args = parse_args()
+    if args.seeds < 2:
+        fail("--seeds must be at least 2 (the noise floor compares two seeds)")
     root = args.export_dir
     scene_path = root / "scene.json"
     if not scene_path.is_file():
@@ -230,8 +237,7 @@ def main():
     variant = choose_variant(mi, args.variant)
     renders = scene_json["renders"]
     threads = renders[0]["threads"]
-    if variant.startswith("llvm"):
-        dr.set_thread_count(threads)
+    dr.set_thread_count(threads)  # Dr.Jit's pool runs every variant's render
     k = scene_json["camera"]["intrinsics"]
     print(
         f"Mitsuba {mi.__version__} variant {variant}, {threads} threads (Glint's); "
@@ -250,12 +256,13 @@ def main():
         scene = build_scene(mi, scene_json, root, integrator)
         glint = load_glint_exr(mi, root / r["exr"])
         g = glint["radiance"]
-        # Cold run (includes JIT compilation for llvm variants), then two timed runs.
-        _, cold_s = render(mi, dr, scene, spp, args.seed + 100)
-        m1, t1 = render(mi, dr, scene, spp, args.seed)
-        m2, t2 = render(mi, dr, scene, spp, args.seed + 1)
-        if m1.shape != g.shape:
-            fail(f"Mitsuba image {m1.shape} vs Glint {g.shape}")
+        # A cold run (JIT compilation for llvm variants), then one timed run per seed.
+        _, cold_s = render(mi, dr, scene, spp, args.seed + 1000)
+        runs = [render(mi, dr, scene, spp, args.seed + i) for i in range(args.seeds)]
+        ms = [m for m, _ in runs]
+        if ms[0].shape != g.shape:
+            fail(f"Mitsuba image {ms[0].shape} vs Glint {g.shape}")
+        m_mean = np.mean(ms, axis=0)
         hit = np.isfinite(glint["depth_m"])
         signal = hit & (g > 0.01 * np.percentile(g[hit], 99))
         labels = glint["label"]
@@ -264,37 +271,45 @@ def main():
             "bin": signal & (labels == bin_label),
             "all": signal,
         }
-        warm_s = min(t1, t2)
         for name, mask in regions.items():
             if mask.sum() == 0:
                 continue
+            per_seed = [rel_stats(m, g, g, mask) for m in ms]
             rows.append(
                 {
                     "transport": r["transport"],
                     "region": name,
                     "pixels": int(mask.sum()),
-                    "vs_glint": rel_stats(m1, g, g, mask),
-                    "noise_floor": rel_stats(m1, m2, g, mask),
+                    "mean_of_seeds_vs_glint": rel_stats(m_mean, g, g, mask),
+                    "per_seed_sum_ratio_minus_1": [x["sum_ratio_minus_1"] for x in per_seed],
+                    # Clamping is fair only between images of equal sample counts: per seed.
+                    "per_seed_clamped_sum_ratio_minus_1": [
+                        x["clamped_sum_ratio_minus_1"] for x in per_seed
+                    ],
+                    "seed1_vs_glint": rel_stats(ms[0], g, g, mask),
+                    "noise_floor_seed1_vs_seed2": rel_stats(ms[0], ms[1], g, mask),
                     "glint_s": r["time_s"],
-                    "mitsuba_s": warm_s,
+                    "mitsuba_s": min(t for _, t in runs),
                     "mitsuba_cold_s": cold_s,
                 }
             )
 
     print(
-        "| transport | region | signal px | sum ratio − 1 | q99-clamped sum − 1 | mean abs rel "
-        "| median abs rel | noise floor: sum − 1, clamped, mean, median | Glint s "
-        "| Mitsuba s (cold) | Glint/Mitsuba time |"
+        f"| transport | region | signal px | ΣM/ΣG − 1 (mean of {args.seeds} seeds) "
+        "| per seed: min … max | q99-clamped, seed mean | mean abs rel, median (seed 1) "
+        "| noise floor: mean, median (seed 1 vs 2) | Glint s | Mitsuba s (cold) "
+        "| Glint/Mitsuba time |"
     )
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for x in rows:
-        v, n = x["vs_glint"], x["noise_floor"]
+        a, v, n = x["mean_of_seeds_vs_glint"], x["seed1_vs_glint"], x["noise_floor_seed1_vs_seed2"]
+        seeds = x["per_seed_sum_ratio_minus_1"]
+        clamped = float(np.mean(x["per_seed_clamped_sum_ratio_minus_1"]))
         print(
-            f"| {x['transport']} | {x['region']} | {x['pixels']} | {v['sum_ratio_minus_1']:+.4f} "
-            f"| {v['clamped_sum_ratio_minus_1']:+.4f} "
-            f"| {v['mean_abs_rel']:.4f} | {v['median_abs_rel']:.4f} "
-            f"| {n['sum_ratio_minus_1']:+.4f}, {n['clamped_sum_ratio_minus_1']:+.4f}, "
-            f"{n['mean_abs_rel']:.4f}, {n['median_abs_rel']:.4f} "
+            f"| {x['transport']} | {x['region']} | {x['pixels']} | {a['sum_ratio_minus_1']:+.4f} "
+            f"| {min(seeds):+.4f} … {max(seeds):+.4f} | {clamped:+.4f} "
+            f"| {v['mean_abs_rel']:.4f}, {v['median_abs_rel']:.4f} "
+            f"| {n['mean_abs_rel']:.4f}, {n['median_abs_rel']:.4f} "
             f"| {x['glint_s']:.3f} | {x['mitsuba_s']:.3f} ({x['mitsuba_cold_s']:.3f}) "
             f"| {x['glint_s'] / x['mitsuba_s']:.2f} |"
         )
