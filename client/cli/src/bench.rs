@@ -48,6 +48,9 @@ pub enum BenchCommand {
         /// Samples per pixel of the exported renders (Mitsuba renders with the same).
         #[arg(long, default_value_t = 64)]
         export_spp: u32,
+        /// Seed of the exported Glint renders (another seed shows Glint's own noise).
+        #[arg(long, default_value_t = 1)]
+        export_seed: u64,
     },
 }
 
@@ -72,8 +75,16 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
             mitsuba_export: Some(dir),
             export_resolution,
             export_spp,
+            export_seed,
             ..
-        } => export_render_scene(part, instances, &dir, export_resolution, export_spp),
+        } => export_render_scene(
+            part,
+            instances,
+            &dir,
+            export_resolution,
+            export_spp,
+            export_seed,
+        ),
     }
 }
 
@@ -295,6 +306,7 @@ fn export_render_scene(
     dir: &std::path::Path,
     (width, height): (u32, u32),
     spp: u32,
+    seed: u64,
 ) -> anyhow::Result<()> {
     use crate::mitsuba_export::{ExportShape, MitsubaExport};
     use glint_camera::materials;
@@ -339,7 +351,7 @@ fn export_render_scene(
         camera,
         projector: &projector,
         samples_per_pixel: spp,
-        seed: 1,
+        seed,
     };
     let path = crate::mitsuba_export::write(dir, &export)?;
     println!(

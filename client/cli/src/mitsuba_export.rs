@@ -155,6 +155,7 @@ pub fn write(dir: &Path, export: &MitsubaExport) -> anyhow::Result<std::path::Pa
             "max_bounces": max_bounces,
             "roulette_after": roulette_after,
             "samples_per_pixel": export.samples_per_pixel,
+            "seed": export.seed,
             "exr": file,
             "time_s": time_s,
             "rays_traced": out.rays_traced,
