@@ -38,6 +38,19 @@ pub enum BenchCommand {
         /// Samples per pixel for the ray-throughput rows.
         #[arg(long, default_value_t = 2)]
         spp: u32,
+        /// Instead of the tables, write the scene (white projector) for the Mitsuba 3 cross-check
+        /// `services/render/scripts/mitsuba_crosscheck.py`, with Glint's radiance of it.
+        #[arg(long)]
+        mitsuba_export: Option<PathBuf>,
+        /// Camera resolution of the export, WIDTHxHEIGHT (the N35's field of view is kept).
+        #[arg(long, default_value = "640x512", value_parser = crate::capture_cmd::parse_resolution)]
+        export_resolution: (u32, u32),
+        /// Samples per pixel of the exported renders (Mitsuba renders with the same).
+        #[arg(long, default_value_t = 64)]
+        export_spp: u32,
+        /// Seed of the exported Glint renders (another seed shows Glint's own noise).
+        #[arg(long, default_value_t = 1)]
+        export_seed: u64,
     },
 }
 
@@ -53,7 +66,25 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
             part,
             instances,
             spp,
+            mitsuba_export: None,
+            ..
         } => bench_render(part, instances, spp),
+        BenchCommand::Render {
+            part,
+            instances,
+            mitsuba_export: Some(dir),
+            export_resolution,
+            export_spp,
+            export_seed,
+            ..
+        } => export_render_scene(
+            part,
+            instances,
+            &dir,
+            export_resolution,
+            export_spp,
+            export_seed,
+        ),
     }
 }
 
@@ -161,10 +192,43 @@ fn sample_checksum(grid: &SdfGrid, p: &Point3<f64>) -> f64 {
     s.distance_m + s.gradient.x
 }
 
-fn bench_render(part: Part, instances: u32, spp: u32) -> anyhow::Result<()> {
+/// The render bench's scene: `instances` of `part` dropped into the default bin (seed 1) with
+/// their ground-truth material, seen by `rig` from the first view of the spherical cap.
+struct BenchScene {
+    bin: glint_camera::bin::BinSpec,
+    mesh: glint_geometry::TriMesh,
+    poses: Vec<nalgebra::Isometry3<f64>>,
+    part_material: glint_render::bsdf::PrincipledParams<f32>,
+    scene: glint_render::scene::Scene,
+    /// Left camera → world.
+    t_w_c: nalgebra::Isometry3<f64>,
+}
+
+fn bench_scene(
+    part: Part,
+    instances: u32,
+    rig: &glint_render::rig::SliRig,
+) -> anyhow::Result<BenchScene> {
     use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
-    use glint_camera::capture::{CaptureConfig, MockSliCamera};
     use glint_camera::{materials, views};
+    let bin = BinSpec::default();
+    let mesh = part.mesh();
+    let poses = drop_parts(&mesh, instances as usize, &bin, 1)?;
+    let part_material = materials::ground_truth(part);
+    let scene = bin_scene(&mesh, &poses, part_material, &bin)?;
+    let t_w_c = views::spherical_cap(1, 0.6, 0.0, bin.centre(), rig.stereo.baseline_m)[0];
+    Ok(BenchScene {
+        bin,
+        mesh,
+        poses,
+        part_material,
+        scene,
+        t_w_c,
+    })
+}
+
+fn bench_render(part: Part, instances: u32, spp: u32) -> anyhow::Result<()> {
+    use glint_camera::capture::{CaptureConfig, MockSliCamera};
     use glint_render::integrator::{LightTransport, RenderSettings, render};
     use glint_render::rig::SliRig;
 
@@ -172,12 +236,8 @@ fn bench_render(part: Part, instances: u32, spp: u32) -> anyhow::Result<()> {
         instances >= 1 && spp >= 1,
         "--instances and --spp must be at least 1"
     );
-    let bin = BinSpec::default();
-    let mesh = part.mesh();
-    let poses = drop_parts(&mesh, instances as usize, &bin, 1)?;
-    let scene = bin_scene(&mesh, &poses, materials::ground_truth(part), &bin)?;
     let full = SliRig::ensenso_n35();
-    let t_w_c = views::spherical_cap(1, 0.6, 0.0, bin.centre(), full.stereo.baseline_m)[0];
+    let BenchScene { scene, t_w_c, .. } = bench_scene(part, instances, &full)?;
     let [camera, _] = full.cameras(&t_w_c);
     let projector = full.projector(
         &t_w_c,
@@ -235,5 +295,71 @@ fn bench_render(part: Part, instances: u32, spp: u32) -> anyhow::Result<()> {
             start.elapsed().as_secs_f64()
         );
     }
+    Ok(())
+}
+
+/// The bench scene (same part, drop seed and view as [`bench_render`]) under the white pattern,
+/// exported for Mitsuba with Glint's single- and multi-path radiance.
+fn export_render_scene(
+    part: Part,
+    instances: u32,
+    dir: &std::path::Path,
+    (width, height): (u32, u32),
+    spp: u32,
+    seed: u64,
+) -> anyhow::Result<()> {
+    use crate::mitsuba_export::{ExportShape, MitsubaExport};
+    use glint_camera::materials;
+    use glint_render::projector::Pattern;
+    use glint_render::rig::SliRig;
+
+    anyhow::ensure!(
+        instances >= 1 && spp >= 1,
+        "--instances and --export-spp must be at least 1"
+    );
+    let rig = SliRig::ensenso_n35().resized(width, height)?;
+    let BenchScene {
+        bin,
+        mesh,
+        poses,
+        part_material,
+        scene,
+        t_w_c,
+    } = bench_scene(part, instances, &rig)?;
+    let [camera, _] = rig.cameras(&t_w_c);
+    let projector = rig.projector(&t_w_c, Pattern::White);
+    let mut shapes: Vec<ExportShape> = poses
+        .iter()
+        .enumerate()
+        .map(|(i, t_w_o)| ExportShape {
+            name: format!("{}_{:02}", part.name(), i + 1),
+            mesh_w: mesh.transformed(&t_w_o.cast()),
+            material: part.name(),
+            label: i as u16 + 1,
+        })
+        .collect();
+    shapes.push(ExportShape {
+        name: "bin".into(),
+        mesh_w: bin.mesh(),
+        material: "bin",
+        label: glint_camera::bin::BIN_LABEL,
+    });
+    let export = MitsubaExport {
+        scene: &scene,
+        shapes,
+        materials: vec![(part.name(), part_material), ("bin", materials::bin())],
+        camera,
+        projector: &projector,
+        samples_per_pixel: spp,
+        seed,
+    };
+    let path = crate::mitsuba_export::write(dir, &export)?;
+    println!(
+        "wrote {} ({} × {instances} and the bin, {width}×{height}, {spp} spp); next: \
+         python3 services/render/scripts/mitsuba_crosscheck.py {}",
+        path.display(),
+        part.display_name(),
+        dir.display()
+    );
     Ok(())
 }

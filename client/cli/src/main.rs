@@ -8,6 +8,7 @@ mod capture_cmd;
 mod demo;
 mod eval;
 mod mesh_cmd;
+mod mitsuba_export;
 mod preview;
 mod progress;
 

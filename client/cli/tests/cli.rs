@@ -196,3 +196,77 @@ fn capture_writes_a_bop_scene_that_reads_back() {
     );
     assert!(err.contains("64 to 8192"), "{err}");
 }
+
+#[test]
+fn render_bench_exports_a_scene_for_mitsuba() {
+    use glint_geometry::LengthUnit;
+    use glint_geometry::io::read_mesh;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("mitsuba");
+    let o = glint(&[
+        "bench",
+        "render",
+        "--part",
+        "zigzag",
+        "--instances",
+        "2",
+        "--mitsuba-export",
+        out.to_str().unwrap(),
+        "--export-resolution",
+        "128x96",
+        "--export-spp",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("scene.json")).unwrap()).unwrap();
+
+    // Two parts and the bin, in the world frame and in metres: the parts lie inside the bin.
+    let shapes = scene["shapes"].as_array().unwrap();
+    assert_eq!(shapes.len(), 3, "{scene}");
+    let mesh_of = |s: &serde_json::Value| {
+        read_mesh(&out.join(s["file"].as_str().unwrap()), LengthUnit::Metre)
+            .unwrap()
+            .mesh
+    };
+    let bin = shapes.iter().find(|s| s["name"] == "bin").unwrap();
+    let (bin_lo, bin_hi) = mesh_of(bin).aabb().unwrap();
+    for s in shapes.iter().filter(|s| s["name"] != "bin") {
+        let mesh = mesh_of(s);
+        assert_eq!(mesh.triangles.len(), 708, "the zigzag's triangles");
+        let (lo, hi) = mesh.aabb().unwrap();
+        for k in 0..3 {
+            assert!(lo[k] >= bin_lo[k] && hi[k] <= bin_hi[k], "{s}: {lo} {hi}");
+        }
+        let material = &scene["materials"][s["material"].as_u64().unwrap() as usize];
+        assert_eq!(material["name"], "zigzag");
+    }
+    let k = &scene["camera"]["intrinsics"];
+    assert_eq!(
+        (k["width_px"].as_u64(), k["height_px"].as_u64()),
+        (Some(128), Some(96))
+    );
+    assert!((k["fx_px"].as_f64().unwrap() - 1083.1 * 0.1).abs() < 1e-9);
+
+    // Glint's renders: the same first camera ray per pixel, so multi-path only adds light.
+    let renders = scene["renders"].as_array().unwrap();
+    assert_eq!(renders.len(), 2);
+    let radiance = |r: &serde_json::Value| {
+        let channels =
+            glint_render::exr_io::read_exr(&out.join(r["exr"].as_str().unwrap())).unwrap();
+        let get = |name: &str| channels.iter().find(|(n, _)| n == name).unwrap().1.clone();
+        let (radiance, depth, label) = (get("radiance"), get("depth_m"), get("label"));
+        assert_eq!((radiance.width(), radiance.height()), (128, 96));
+        for (d, l) in depth.data().iter().zip(label.data()) {
+            assert_eq!(d.is_finite(), *l != 0.0, "depth where something is hit");
+        }
+        radiance
+    };
+    let (single, multi) = (radiance(&renders[0]), radiance(&renders[1]));
+    assert_eq!(renders[0]["transport"], "single-path");
+    assert!(single.data().iter().any(|&x| x > 0.0));
+    for (s, m) in single.data().iter().zip(multi.data()) {
+        assert!(s.is_finite() && *s >= 0.0);
+        assert!(*m >= s * (1.0 - 1e-5), "multi-path {m} < single-path {s}");
+    }
+}

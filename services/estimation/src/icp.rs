@@ -194,7 +194,9 @@ pub struct IcpResult {
 /// The model side of ICP: dense surface samples with outward normals in the object frame and a
 /// k-d tree over them. Build once per part; share between refinements and threads.
 pub struct IcpModel {
-    tree: ImmutableKdTree<f64, 3>,
+    /// f32 coordinates search faster; at part scale (< 0.1 m) they round by < 4 nm, and the
+    /// distances used are recomputed in f64 from `points`.
+    tree: ImmutableKdTree<f32, 3>,
     points: Vec<Point3<f64>>,
     normals: Vec<Vector3<f64>>,
 }
@@ -227,7 +229,10 @@ impl IcpModel {
             points.push(s.point);
             normals.push(normal);
         }
-        let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+        let coords: Vec<[f32; 3]> = points
+            .iter()
+            .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+            .collect();
         let tree = ImmutableKdTree::new_from_slice(&coords)
             .map_err(|e| IcpError::ModelTree(format!("{e:?}")))?;
         Ok(Self {
@@ -257,10 +262,11 @@ impl IcpModel {
     fn nearest(&self, q: &Vector3<f64>) -> (usize, f64) {
         let hit = self
             .tree
-            .query(&[q.x, q.y, q.z])
-            .nearest_one::<SquaredEuclidean<f64>>()
+            .query(&[q.x as f32, q.y as f32, q.z as f32])
+            .nearest_one::<SquaredEuclidean<f32>>()
             .execute();
-        (hit.item as usize, hit.distance)
+        let j = hit.item as usize;
+        (j, (self.points[j].coords - q).norm_squared())
     }
 }
 
