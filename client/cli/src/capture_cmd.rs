@@ -7,15 +7,20 @@ use std::time::Instant;
 use anyhow::Context;
 use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
 use glint_camera::capture::{CaptureConfig, MockSliCamera, StereoCapture, depth_quality};
-use glint_camera::dataset::bop::{BopGt, BopSceneWriter, MaskKind, write_models};
-use glint_camera::dataset::{PatternImage, StereoSide};
+use glint_camera::dataset::bop::{
+    BopCamera, BopGt, BopGtInfo, BopSceneWriter, MaskKind, write_dataset_camera, write_models,
+};
+use glint_camera::dataset::rig_file::{write_gt_sensor_json, write_rig_json};
+use glint_camera::dataset::{PatternImage, StereoSide, write_exposure_stack};
 use glint_camera::effects::missing_causes;
+use glint_camera::visibility::{InstanceVisibility, instance_visibility};
 use glint_camera::{materials, views};
-use glint_geometry::image::Image;
+use glint_geometry::image::{DepthMap, Image};
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::parts::Part;
 use glint_render::rig::SliRig;
 use image::ImageEncoder;
+use nalgebra::Isometry3;
 
 #[derive(clap::Args)]
 pub struct CaptureArgs {
@@ -36,9 +41,49 @@ pub struct CaptureArgs {
     /// Samples per pixel of the multi-path renders.
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=1024))]
     pub spp: u32,
+    /// Instead of depth captures, take a white-pattern exposure stack of the left camera per
+    /// view (for calibrating the camera response). Exposure times in MILLISECONDS, comma
+    /// separated, e.g. `0.25,0.5,1,2,4,8`. Given without a list: 0.25,0.5,1,2,4,8,16,32,64 ms,
+    /// which with the default sensor (its own Δt is 10 ms) spans from under-exposed (on the
+    /// Gear and the Chrome Screw, a fifth or more of the part pixels below 2 % of full scale,
+    /// none saturated) to over-exposed (over a third saturated); the matte Zigzag needs
+    /// shorter times to reach under-exposure. Writes test/000001/glint/exposure_stack/XXXXXX/
+    /// per view.
+    #[arg(
+        long,
+        value_name = "MS,MS,...",
+        num_args = 0..=1,
+        require_equals = false,
+        default_missing_value = DEFAULT_EXPOSURE_STACK_MS,
+        value_parser = parse_exposures_ms
+    )]
+    pub exposure_stack: Option<ExposureTimes>,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// The default exposure stack, milliseconds (the default sensor's own Δt is 10 ms).
+pub const DEFAULT_EXPOSURE_STACK_MS: &str = "0.25,0.5,1,2,4,8,16,32,64";
+
+/// Exposure times, seconds, increasing (a newtype so clap takes the list as one value).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExposureTimes(pub Vec<f64>);
+
+/// Exposure times in ms → seconds, validated (≥ 2, finite, > 0, distinct) and sorted.
+fn parse_exposures_ms(s: &str) -> Result<ExposureTimes, String> {
+    let ms = s
+        .split(',')
+        .map(|x| {
+            x.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("exposure {x:?} is not a number of milliseconds"))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let seconds: Vec<f64> = ms.iter().map(|m| m * 1e-3).collect();
+    glint_camera::exposure::validated_exposures(&seconds)
+        .map(ExposureTimes)
+        .map_err(|e| format!("{e} (given in ms: {s})"))
 }
 
 fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
@@ -131,6 +176,31 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
         "bin_material": materials::bin().to_array(),
         "parameter_names": glint_render::bsdf::PrincipledParams::<f32>::NAMES,
     }));
+    // The rig as known hardware (calibration reads it) and the GT sensor (evaluation only).
+    let layout = bop.layout().clone();
+    std::fs::create_dir_all(layout.glint_dir())
+        .with_context(|| format!("creating {}", layout.glint_dir().display()))?;
+    write_rig_json(&layout.rig_json(), &rig)?;
+    write_gt_sensor_json(&layout.gt_sensor_json(), &cameras[0].1.config.sensor)?;
+    write_dataset_camera(
+        &args.out.join("camera.json"),
+        &BopCamera {
+            intrinsics: rig.stereo.intrinsics,
+            depth_scale_mm: Some(bop.depth_scale_mm()),
+            t_c_w: None,
+        },
+    )?;
+    if let Some(ExposureTimes(exposures_s)) = &args.exposure_stack {
+        return run_exposure_stacks(
+            args,
+            &cameras[0].1,
+            &views,
+            &poses,
+            OBJ_ID,
+            bop,
+            exposures_s,
+        );
+    }
     let bar = crate::progress::bar(views.len() as u64, "capture");
     let mut totals = [(0usize, 0usize); 2];
     let mut cause_totals = [0usize; 4];
@@ -164,10 +234,9 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
             &mut bop,
             k as u32,
             &captures[0],
-            &rig,
+            &cameras[0].1,
             &poses,
             OBJ_ID,
-            cameras[0].1.config.sensor.max_dn(),
         )?;
         for label in 1..=args.instances as u16 {
             let q: Vec<_> = captures
@@ -292,20 +361,18 @@ fn write_depth(path: &Path, capture: &StereoCapture) -> anyhow::Result<()> {
     write_file_atomically(path, &png).with_context(|| format!("writing {}", path.display()))
 }
 
-/// One view as a BOP image: camera, depth, left/right patterns (8-bit), visible masks and GT
-/// poses of every instance the left camera sees.
+/// One view as a BOP image: camera, depth, left/right patterns (8-bit), and the annotations of
+/// [`write_bop_annotations`].
 fn write_bop_image(
     bop: &mut BopSceneWriter,
     im_id: u32,
     capture: &StereoCapture,
-    rig: &SliRig,
-    poses: &[nalgebra::Isometry3<f64>],
+    camera: &MockSliCamera<'_>,
+    poses: &[Isometry3<f64>],
     obj_id: u32,
-    max_dn: u16,
 ) -> anyhow::Result<()> {
-    let t_c_w = capture.t_w_c.inverse();
-    bop.set_camera(im_id, &rig.stereo.intrinsics, Some(&t_c_w))?;
     bop.write_depth(im_id, &capture.depth)?;
+    let max_dn = camera.config.sensor.max_dn();
     let to_8bit = |img: &Image<u16>| {
         let data = img
             .data()
@@ -324,19 +391,128 @@ fn write_bop_image(
         StereoSide::Right,
         &PatternImage::Bits8(to_8bit(&capture.right)),
     )?;
-    let visible: Vec<u16> = (1..=poses.len() as u16)
-        .filter(|l| capture.gt_label.data().contains(l))
+    write_bop_annotations(
+        bop,
+        im_id,
+        &capture.t_w_c,
+        camera,
+        poses,
+        obj_id,
+        Some(&capture.depth),
+    )?;
+    Ok(())
+}
+
+/// A view's camera (intrinsics, world → camera) and, for every instance whose silhouette
+/// reaches the left image, its GT pose, amodal `mask/`, `mask_visib/` and GT info
+/// (`px_count_valid` from `depth` when given). Returns the instances written, GT index order.
+fn write_bop_annotations(
+    bop: &mut BopSceneWriter,
+    im_id: u32,
+    t_w_c: &Isometry3<f64>,
+    camera: &MockSliCamera<'_>,
+    poses: &[Isometry3<f64>],
+    obj_id: u32,
+    depth: Option<&DepthMap>,
+) -> anyhow::Result<Vec<InstanceVisibility>> {
+    let t_c_w = t_w_c.inverse();
+    bop.set_camera(im_id, &camera.rig.stereo.intrinsics, Some(&t_c_w))?;
+    let [left, _] = camera.rig.cameras(t_w_c);
+    let labels: Vec<u16> = (1..=poses.len() as u16).collect();
+    let seen: Vec<InstanceVisibility> = instance_visibility(camera.scene, &left, &labels)
+        .into_iter()
+        .filter(|v| v.px_count_all > 0)
         .collect();
-    let gts: Vec<BopGt> = visible
-        .iter()
-        .map(|&l| BopGt {
+    let mut gts = Vec::with_capacity(seen.len());
+    let mut infos = Vec::with_capacity(seen.len());
+    for (gt_index, v) in seen.iter().enumerate() {
+        bop.write_mask(im_id, gt_index, MaskKind::Full, &v.mask_all)?;
+        bop.write_mask(im_id, gt_index, MaskKind::Visible, &v.mask_visib)?;
+        gts.push(BopGt {
             obj_id,
-            t_c_o: t_c_w * poses[l as usize - 1],
-        })
-        .collect();
-    let label_to_gt: Vec<(u16, usize)> = visible.iter().enumerate().map(|(i, &l)| (l, i)).collect();
-    bop.write_masks_from_labels(im_id, MaskKind::Visible, &capture.gt_label, &label_to_gt)?;
+            t_c_o: t_c_w * poses[v.label as usize - 1],
+        });
+        infos.push(
+            BopGtInfo::from_masks(&v.mask_all, &v.mask_visib, depth)
+                .map_err(|problem| anyhow::anyhow!("GT info of image {im_id}: {problem}"))?,
+        );
+    }
     bop.set_gt(im_id, &gts);
+    bop.set_gt_info(im_id, &infos);
+    Ok(seen)
+}
+
+/// Fraction of full scale below which an exposure-stack pixel counts as under-exposed.
+const UNDER_EXPOSED_FRACTION: f64 = 0.02;
+
+/// `glint capture --exposure-stack`: per view, a white-pattern exposure stack of the left
+/// camera in `glint/exposure_stack/XXXXXX/`, with the view's camera, GT poses and masks.
+fn run_exposure_stacks(
+    args: &CaptureArgs,
+    camera: &MockSliCamera<'_>,
+    views: &[Isometry3<f64>],
+    poses: &[Isometry3<f64>],
+    obj_id: u32,
+    mut bop: BopSceneWriter,
+    exposures_s: &[f64],
+) -> anyhow::Result<()> {
+    let max_dn = camera.config.sensor.max_dn();
+    let under_dn = (UNDER_EXPOSED_FRACTION * max_dn as f64).ceil() as u16;
+    let ms: Vec<String> = exposures_s.iter().map(|t| format!("{}", t * 1e3)).collect();
+    let mut report = format!(
+        "# glint capture --exposure-stack: {} × {}, {} views, seed {}, {}×{} px, {} spp multi-path, white pattern\n\n\
+         Exposure times (ms): {}. Per view and exposure, over the pixels where a part is visible: the share \
+         under-exposed (below {:.0} % of full scale, DN < {under_dn}) and saturated (DN = {max_dn}).\n\n\
+         | view | exposure (ms) | part pixels | under-exposed | saturated |\n|---:|---:|---:|---:|---:|\n",
+        args.part.display_name(),
+        args.instances,
+        args.views,
+        args.seed,
+        args.resolution.0,
+        args.resolution.1,
+        args.spp,
+        ms.join(", "),
+        UNDER_EXPOSED_FRACTION * 100.0,
+    );
+    let bar = crate::progress::bar(views.len() as u64, "exposure stacks");
+    for (k, t_w_c) in views.iter().enumerate() {
+        let seed = args.seed.wrapping_mul(1000).wrapping_add(k as u64);
+        let stack = camera.capture_exposure_stack(t_w_c, exposures_s, seed)?;
+        let dir = bop.layout().exposure_stack_dir(k as u32);
+        write_exposure_stack(&dir, &stack)?;
+        let seen = write_bop_annotations(&mut bop, k as u32, t_w_c, camera, poses, obj_id, None)?;
+        let on_part: Vec<usize> = (0..stack.gt_left_radiance.data().len())
+            .filter(|&i| seen.iter().any(|v| v.mask_visib.data()[i] != 0))
+            .collect();
+        for (image, dt) in stack.left.iter().zip(&stack.exposures_s) {
+            let n = on_part.len().max(1) as f64;
+            let under = on_part
+                .iter()
+                .filter(|&&i| image.data()[i] < under_dn)
+                .count();
+            let saturated = on_part
+                .iter()
+                .filter(|&&i| image.data()[i] >= max_dn)
+                .count();
+            report += &format!(
+                "| {k} | {} | {} | {:.3} | {:.3} |\n",
+                dt * 1e3,
+                on_part.len(),
+                under as f64 / n,
+                saturated as f64 / n
+            );
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    report += "\nFiles: `test/000001/glint/exposure_stack/XXXXXX/stack.json` with `dt_NNN.png` (the sensor's digital numbers), \
+               `glint/rig.json` (the rig as known hardware), `glint/gt_sensor.json` (ground truth, evaluation only), \
+               and the BOP files of each view (scene_camera, scene_gt, scene_gt_info, mask, mask_visib).\n";
+    bop.finish()?;
+    let path = args.out.join("report.md");
+    write_file_atomically(&path, report.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("{report}\nwrote {}", args.out.display());
     Ok(())
 }
 
