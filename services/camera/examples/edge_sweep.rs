@@ -144,13 +144,18 @@ fn main() -> anyhow::Result<()> {
                     ..capture.clone()
                 };
                 for &label in &labels {
-                    // The base radius decides eligibility, so every variant has the same pixels.
-                    qualities.push(depth_quality(
+                    // The base radius decides eligibility, so every variant has the same
+                    // pixels; like `glint capture`'s totals, instances with fewer than 200
+                    // eligible pixels are left out.
+                    let q = depth_quality(
                         &rematched,
                         &rig,
                         config.matcher.window_radius_px,
                         Some(label),
-                    ));
+                    );
+                    if q.eligible >= 200 {
+                        qualities.push(q);
+                    }
                 }
                 let bins = errors_by_edge_distance(&rematched, &labels, &[2]);
                 near_edge += bins[0].farther_5mm + bins[0].nearer_5mm;
