@@ -6,12 +6,15 @@ use std::time::Instant;
 
 use anyhow::Context;
 use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
-use glint_camera::capture::{CaptureConfig, MockSliCamera, StereoCapture, depth_quality};
+use glint_camera::capture::{
+    CaptureConfig, DepthQuality, MockSliCamera, StereoCapture, depth_quality,
+};
 use glint_camera::dataset::bop::{
     BopCamera, BopGt, BopGtInfo, BopSceneWriter, MaskKind, write_dataset_camera, write_models,
 };
 use glint_camera::dataset::rig_file::{write_gt_sensor_json, write_rig_json};
 use glint_camera::dataset::{PatternImage, StereoSide, write_exposure_stack};
+use glint_camera::edge_errors::{EdgeBin, errors_by_edge_distance};
 use glint_camera::effects::missing_causes;
 use glint_camera::visibility::{InstanceVisibility, instance_visibility};
 use glint_camera::{materials, views};
@@ -202,8 +205,10 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
         );
     }
     let bar = crate::progress::bar(views.len() as u64, "capture");
-    let mut totals = [(0usize, 0usize); 2];
+    let mut totals: [Vec<DepthQuality>; 2] = Default::default();
     let mut cause_totals = [0usize; 4];
+    let part_labels: Vec<u16> = (1..=args.instances as u16).collect();
+    let mut edge_totals: [Vec<EdgeBin>; 2] = Default::default();
     for (k, t_w_c) in views.iter().enumerate() {
         let seed = args.seed.wrapping_mul(1000).wrapping_add(k as u64);
         let start = Instant::now();
@@ -238,6 +243,18 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
             &poses,
             OBJ_ID,
         )?;
+        for (totals, capture) in edge_totals.iter_mut().zip(&captures) {
+            let bins = errors_by_edge_distance(capture, &part_labels, &EDGE_BIN_BOUNDS_PX);
+            if totals.is_empty() {
+                *totals = bins;
+            } else {
+                for (t, b) in totals.iter_mut().zip(&bins) {
+                    t.valid += b.valid;
+                    t.farther_5mm += b.farther_5mm;
+                    t.nearer_5mm += b.nearer_5mm;
+                }
+            }
+        }
         for label in 1..=args.instances as u16 {
             let q: Vec<_> = captures
                 .iter()
@@ -248,8 +265,7 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
             }
             let causes = missing_causes(&cameras[0].1, &captures[0], label, seed ^ 0x51);
             for (t, qi) in totals.iter_mut().zip(&q) {
-                t.0 += qi.eligible;
-                t.1 += qi.valid;
+                t.push(*qi);
             }
             for (t, c) in cause_totals.iter_mut().zip([
                 causes.saturated,
@@ -276,18 +292,48 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let missing = |(eligible, valid): (usize, usize)| 1.0 - valid as f64 / eligible.max(1) as f64;
+    let [shiny_all, diffuse_all] = totals.map(DepthQuality::pooled);
     report += &format!(
-        "\n**All instances:** missing depth {:.3} shiny vs {:.3} diffuse twin; missing pixels on the shiny part by cause: \
+        "\n**All instances:** missing depth {:.3} shiny vs {:.3} diffuse twin; depth RMSE {:.3} mm shiny vs {:.3} mm diffuse \
+         (5 mm outliers excluded); valid pixels more than 5 mm off: {:.3} shiny vs {:.3} diffuse; missing pixels on the shiny part by cause: \
          saturated {}, low SNR {}, inter-reflection {}, other {}.\n\nImages per view: `view_NNN/capture.exr` (float channels: matched `depth_m` with NaN where missing, and for evaluation the ground-truth `gt_depth_m`, `gt_label` and left radiance `gt_left_radiance`), `left.png`, `right.png` \
          (pattern images as read out), `depth.png` and `depth_diffuse_twin.png` (near = blue, far = red, missing = magenta).\n",
-        missing(totals[0]),
-        missing(totals[1]),
+        shiny_all.missing_fraction(),
+        diffuse_all.missing_fraction(),
+        shiny_all.rmse_m * 1e3,
+        diffuse_all.rmse_m * 1e3,
+        shiny_all.outlier_share(),
+        diffuse_all.outlier_share(),
         cause_totals[0],
         cause_totals[1],
         cause_totals[2],
         cause_totals[3]
     );
+    report += &format!(
+        "\n**Depth errors by distance to the nearest depth edge** (all views; part pixels with matched depth; \
+         L∞ px to a true-depth step > 5 mm, the window radius is {radius} px): share more than 5 mm farther / nearer than the truth.\n\n\
+         | distance (px) | pixels shiny | farther shiny | nearer shiny | pixels diffuse | farther diffuse | nearer diffuse |\n\
+         |---|---:|---:|---:|---:|---:|---:|\n"
+    );
+    for (s, d) in edge_totals[0].iter().zip(&edge_totals[1]) {
+        let share = |x: usize, n: usize| x as f64 / n.max(1) as f64;
+        let range = if s.max_px == u32::MAX {
+            format!("≥ {}", s.min_px)
+        } else if s.min_px == s.max_px {
+            format!("{}", s.min_px)
+        } else {
+            format!("{}–{}", s.min_px, s.max_px)
+        };
+        report += &format!(
+            "| {range} | {} | {:.3} | {:.3} | {} | {:.3} | {:.3} |\n",
+            s.valid,
+            share(s.farther_5mm, s.valid),
+            share(s.nearer_5mm, s.valid),
+            d.valid,
+            share(d.farther_5mm, d.valid),
+            share(d.nearer_5mm, d.valid)
+        );
+    }
     bop.finish()?;
     let path = args.out.join("report.md");
     write_file_atomically(&path, report.as_bytes())
@@ -295,6 +341,9 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
     println!("{report}\nwrote {}", args.out.display());
     Ok(())
 }
+
+/// Upper ends of the distance bins of the edge-error table, px.
+const EDGE_BIN_BOUNDS_PX: [u32; 6] = [0, 1, 2, 3, 5, 8];
 
 fn png_bytes(
     rgb_or_gray: &[u8],

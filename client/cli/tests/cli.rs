@@ -181,6 +181,24 @@ fn capture_writes_a_bop_scene_that_reads_back() {
         }
     }
     assert!(scene.gt_materials().unwrap().is_some());
+    // scene_gt_info: one entry per GT instance, visible ⊆ amodal, agreeing with the masks.
+    for im_id in [0, 1] {
+        let infos = scene.gt_info(im_id).unwrap();
+        assert_eq!(infos.len(), scene.gt(im_id).unwrap().len());
+        for (gt_index, info) in infos.iter().enumerate() {
+            use glint_camera::dataset::bop::MaskKind;
+            let count = |kind| {
+                let m = scene.mask(im_id, gt_index, kind).unwrap();
+                m.data().iter().filter(|&&x| x != 0).count() as u64
+            };
+            assert_eq!(info.px_count_all, count(MaskKind::Full));
+            assert_eq!(info.px_count_visib, count(MaskKind::Visible));
+            assert!(info.px_count_visib <= info.px_count_all && info.px_count_all > 0);
+            assert!(info.px_count_valid <= info.px_count_all);
+            let ratio = info.px_count_visib as f64 / info.px_count_all as f64;
+            assert!((info.visib_fract - ratio).abs() < 1e-12);
+        }
+    }
 
     let err = fails_cleanly(
         &glint(&[
@@ -269,4 +287,78 @@ fn render_bench_exports_a_scene_for_mitsuba() {
         assert!(s.is_finite() && *s >= 0.0);
         assert!(*m >= s * (1.0 - 1e-5), "multi-path {m} < single-path {s}");
     }
+fn capture_exposure_stack_writes_the_calibration_layout() {
+    use glint_camera::dataset::ExposureStackFiles;
+    use glint_camera::dataset::bop::BopSceneReader;
+    use glint_camera::dataset::rig_file::{read_gt_sensor_json, read_rig_json};
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("stack");
+    let o = glint(&[
+        "capture",
+        "--part",
+        "gear",
+        "--instances",
+        "3",
+        "--views",
+        "1",
+        "--resolution",
+        "160x128",
+        "--spp",
+        "1",
+        "--exposure-stack",
+        "4,0.5,1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene_dir = out.join("test/000001");
+    let stack = ExposureStackFiles::read(scene_dir.join("glint/exposure_stack/000000")).unwrap();
+    assert_eq!(stack.exposures_s, vec![0.5e-3, 1e-3, 4e-3]);
+    assert_eq!(
+        (stack.pattern.as_str(), stack.camera.as_str()),
+        ("white", "left")
+    );
+    assert_eq!(stack.bit_depth, 8);
+    assert_eq!(stack.images.len(), 3);
+    // The same radiance read out 8× longer: brighter on average, pixel for pixel mostly.
+    let mean = |k: usize| {
+        stack.images[k]
+            .data()
+            .iter()
+            .map(|&d| d as f64)
+            .sum::<f64>()
+    };
+    assert!(mean(2) > 2.0 * mean(0), "{} vs {}", mean(2), mean(0));
+    let rig = read_rig_json(&scene_dir.join("glint/rig.json")).unwrap();
+    assert_eq!(rig.stereo.intrinsics.width_px, 160);
+    assert!((rig.stereo.baseline_m - 0.10118).abs() < 1e-9);
+    let sensor = read_gt_sensor_json(&scene_dir.join("glint/gt_sensor.json")).unwrap();
+    assert_eq!(sensor.bit_depth, stack.bit_depth);
+    // The BOP files of the same view: camera pose, GT poses and masks.
+    let scene = BopSceneReader::open(&scene_dir).unwrap();
+    assert_eq!(scene.image_ids(), vec![0]);
+    let camera = scene.camera(0).unwrap();
+    assert_eq!(camera.intrinsics.width_px, 160);
+    assert!(camera.t_c_w.is_some());
+    let gts = scene.gt(0).unwrap();
+    assert!(!gts.is_empty());
+    assert_eq!(scene.gt_info(0).unwrap().len(), gts.len());
+    let mask = scene
+        .mask(0, 0, glint_camera::dataset::bop::MaskKind::Full)
+        .unwrap();
+    assert_eq!((mask.width(), mask.height()), (160, 128));
+
+    let err = fails_cleanly(
+        &glint(&[
+            "capture",
+            "--part",
+            "gear",
+            "--exposure-stack",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+        ]),
+        2,
+    );
+    assert!(err.contains("at least 2"), "{err}");
 }

@@ -115,6 +115,24 @@ impl MockSliCamera<'_> {
         ]
     }
 
+    /// Matches a pair of read-out pattern images (digital numbers) with the configured
+    /// matcher: depth in the left camera (NaN where nothing matched) and why each pixel has
+    /// or lacks it.
+    pub fn match_pair(
+        &self,
+        left: &Image<u16>,
+        right: &Image<u16>,
+    ) -> Result<(DepthMap, Image<MatchStatus>), CaptureError> {
+        let max_dn = self.config.sensor.max_dn();
+        let result = match_stereo(
+            &normalised_intensity(left, max_dn),
+            &normalised_intensity(right, max_dn),
+            &self.config.matcher,
+            None,
+        )?;
+        Ok((disparity_to_depth(&result, &self.rig.stereo), result.status))
+    }
+
     /// Captures the random-pattern stereo pair from left-camera pose `t_w_c` and matches it.
     /// `seed` drives the sampling and the sensor noise.
     pub fn capture(
@@ -139,19 +157,13 @@ impl MockSliCamera<'_> {
         let sensor = &self.config.sensor;
         let left = sensor.read_out(&left_render.radiance, seed.wrapping_add(1));
         let right = sensor.read_out(&right_render.radiance, seed.wrapping_add(2));
-        let result = match_stereo(
-            &normalised_intensity(&left, sensor.max_dn()),
-            &normalised_intensity(&right, sensor.max_dn()),
-            &self.config.matcher,
-            None,
-        )?;
-        let depth = disparity_to_depth(&result, &self.rig.stereo);
+        let (depth, match_status) = self.match_pair(&left, &right)?;
         Ok(StereoCapture {
             t_w_c: *t_w_c,
             left,
             right,
             depth,
-            match_status: result.status,
+            match_status,
             gt_left_radiance: left_render.radiance,
             gt_depth_m: left_render.depth_m,
             gt_label: left_render.label,
@@ -185,6 +197,37 @@ impl DepthQuality {
     /// The missing-depth fraction, 1 − coverage.
     pub fn missing_fraction(&self) -> f64 {
         1.0 - self.coverage()
+    }
+
+    /// Valid pixels more than 5 mm off, as a share of the valid pixels.
+    pub fn outlier_share(&self) -> f64 {
+        self.outliers_5mm as f64 / self.valid.max(1) as f64
+    }
+
+    /// Several pixel sets' quality as one: counts add, the RMSE is over all their inliers.
+    pub fn pooled(parts: impl IntoIterator<Item = DepthQuality>) -> DepthQuality {
+        let (mut eligible, mut valid, mut outliers_5mm) = (0, 0, 0);
+        let (mut sum_sq, mut inliers) = (0.0, 0usize);
+        for q in parts {
+            eligible += q.eligible;
+            valid += q.valid;
+            outliers_5mm += q.outliers_5mm;
+            let n = q.valid - q.outliers_5mm;
+            if n > 0 {
+                sum_sq += q.rmse_m * q.rmse_m * n as f64;
+                inliers += n;
+            }
+        }
+        DepthQuality {
+            eligible,
+            valid,
+            rmse_m: if inliers > 0 {
+                (sum_sq / inliers as f64).sqrt()
+            } else {
+                f64::NAN
+            },
+            outliers_5mm,
+        }
     }
 }
 

@@ -4,6 +4,7 @@
 pub mod bin;
 pub mod capture;
 pub mod dataset;
+pub mod edge_errors;
 pub mod effects;
 pub mod exposure;
 pub mod materials;

@@ -73,6 +73,20 @@ pub struct Camera {
     pub t_w_c: Isometry3<f64>,
 }
 
+impl Camera {
+    /// Camera → world rotation and the camera centre in the world, in f32 for ray generation.
+    fn rotation_and_centre(&self) -> (Matrix3<f32>, Vec3A) {
+        let rotation = self
+            .t_w_c
+            .rotation
+            .to_rotation_matrix()
+            .matrix()
+            .cast::<f32>();
+        let c = self.t_w_c.translation.vector.cast::<f32>();
+        (rotation, Vec3A::new(c.x, c.y, c.z))
+    }
+}
+
 /// Renders what `camera` sees of `scene` under `projector`.
 pub fn render(
     scene: &Scene,
@@ -89,14 +103,7 @@ pub fn render(
     let mut radiance = vec![0f32; (w * h) as usize];
     let mut depth = vec![f32::NAN; (w * h) as usize];
     let mut label = vec![0u16; (w * h) as usize];
-    let rotation = camera
-        .t_w_c
-        .rotation
-        .to_rotation_matrix()
-        .matrix()
-        .cast::<f32>();
-    let origin = camera.t_w_c.translation.vector.cast::<f32>();
-    let origin = Vec3A::new(origin.x, origin.y, origin.z);
+    let (rotation, origin) = camera.rotation_and_centre();
     let spp = settings.samples_per_pixel.max(1);
     let rows = radiance
         .par_chunks_mut(w as usize)
@@ -182,14 +189,7 @@ pub fn render_labels(
     let Some(roi) = roi.map_or(Some(PixelRect::full(w, h)), |r| r.clipped_to(w, h)) else {
         return Image::new(w, h, label).expect("sized from the intrinsics");
     };
-    let rotation = camera
-        .t_w_c
-        .rotation
-        .to_rotation_matrix()
-        .matrix()
-        .cast::<f32>();
-    let origin = camera.t_w_c.translation.vector.cast::<f32>();
-    let origin = Vec3A::new(origin.x, origin.y, origin.z);
+    let (rotation, origin) = camera.rotation_and_centre();
     label
         .par_chunks_mut(w as usize)
         .enumerate()

@@ -32,8 +32,11 @@ pub struct EvalObject {
 }
 
 /// How mock-camera scenes are made.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SceneSpec {
+    /// The mock camera's matcher settings (Debug form): scenes matched differently are not
+    /// reused.
+    pub matcher: String,
     pub instances: u32,
     pub views: u32,
     pub width_px: u32,

@@ -14,6 +14,12 @@ use super::error::{DatasetError, read_file};
 
 /// Reads and parses a JSON file.
 pub(crate) fn read_json_file(path: &Path) -> Result<Value, DatasetError> {
+    read_json_as(path)
+}
+
+/// Reads and deserialises a JSON file into `T`; syntax and type errors name the file, line
+/// and column.
+pub(crate) fn read_json_as<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, DatasetError> {
     let bytes = read_file(path)?;
     serde_json::from_slice(&bytes).map_err(|error| DatasetError::Json {
         path: path.to_owned(),

@@ -28,8 +28,8 @@ use glint_render::sensor::Sensor;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use serde_json::json;
 
-use super::error::{DatasetError, read_file};
-use super::json::{JsonNode, read_json_file};
+use super::error::DatasetError;
+use super::json::{JsonNode, read_json_as, read_json_file};
 
 /// What `pixel_convention` says in `rig.json`.
 pub const GLINT_PIXEL_CONVENTION: &str = "pixel (u, v) has its centre at (u + 0.5, v + 0.5); \
@@ -128,13 +128,7 @@ pub fn write_gt_sensor_json(path: &Path, sensor: &Sensor) -> Result<(), DatasetE
 
 /// Reads a `gt_sensor.json` (for evaluating a calibration against the truth).
 pub fn read_gt_sensor_json(path: &Path) -> Result<Sensor, DatasetError> {
-    let bytes = read_file(path)?;
-    serde_json::from_slice(&bytes).map_err(|error| DatasetError::Json {
-        path: path.to_owned(),
-        line: error.line(),
-        column: error.column(),
-        problem: error.to_string(),
-    })
+    read_json_as(path)
 }
 
 #[cfg(test)]

@@ -4,7 +4,7 @@ use super::band::{BandOutput, BandParams, match_band};
 use super::plan::{MatchPlan, Patches};
 use super::select::SelectParams;
 use super::speckle::remove_speckles;
-use super::{MatchStatus, PixelRect, StereoError, StereoMatcherConfig, StereoResult};
+use super::{EdgeWindows, MatchStatus, PixelRect, StereoError, StereoMatcherConfig, StereoResult};
 use glint_geometry::image::Image;
 use rayon::prelude::*;
 
@@ -33,6 +33,133 @@ pub fn match_stereo(
     roi: Option<PixelRect>,
 ) -> Result<StereoResult, StereoError> {
     config.validate()?;
+    let mut result = match_windows(left, right, config, roi)?;
+    if let Some(edge) = config.edge_windows {
+        rematch_near_edges(left, right, config, &edge, &mut result)?;
+    }
+    if let Some(filter) = &config.speckle {
+        let w = left.width() as usize;
+        remove_speckles(
+            result.disparity_px.data_mut(),
+            result.status.data_mut(),
+            w,
+            &result.roi,
+            filter,
+        );
+    }
+    Ok(result)
+}
+
+/// Pixels of the ROI within `radius` (L∞) of a depth edge of `result`: a 4-neighbour pair
+/// with both disparities valid and more than `step_px` apart, or with exactly one valid (a
+/// hole's border; pixels outside the ROI do not count). Row-major, full image.
+pub(super) fn near_depth_edges(result: &StereoResult, step_px: f32, radius: usize) -> Vec<bool> {
+    let (w, h) = (
+        result.disparity_px.width() as usize,
+        result.disparity_px.height() as usize,
+    );
+    let d = result.disparity_px.data();
+    let status = result.status.data();
+    let counts = |i: usize| status[i] != MatchStatus::OutOfRoi;
+    let mut edge = vec![false; w * h];
+    for v in 0..h {
+        for u in 0..w {
+            let i = v * w + u;
+            if !counts(i) {
+                continue;
+            }
+            let right = (u + 1 < w).then_some(i + 1);
+            let below = (v + 1 < h).then_some(i + w);
+            for j in [right, below].into_iter().flatten().filter(|&j| counts(j)) {
+                let jump = match (d[i].is_finite(), d[j].is_finite()) {
+                    (true, true) => (d[i] - d[j]).abs() > step_px,
+                    (false, false) => false,
+                    _ => true,
+                };
+                if jump {
+                    edge[i] = true;
+                    edge[j] = true;
+                }
+            }
+        }
+    }
+    // Separable L∞ dilation by `radius`: rows, then columns, with running counts.
+    let dilate =
+        |line: &mut dyn FnMut(usize) -> usize, len: usize, src: &[bool], out: &mut [bool]| {
+            let mut count = 0usize;
+            for k in 0..len + radius {
+                if k < len && src[line(k)] {
+                    count += 1;
+                }
+                if k > 2 * radius && src[line(k - 2 * radius - 1)] {
+                    count -= 1;
+                }
+                if k >= radius {
+                    out[line(k - radius)] = count > 0;
+                }
+            }
+        };
+    let mut rows = vec![false; w * h];
+    for v in 0..h {
+        dilate(&mut |k| v * w + k, w, &edge, &mut rows);
+    }
+    let mut near = vec![false; w * h];
+    for u in 0..w {
+        dilate(&mut |k| k * w + u, h, &rows, &mut near);
+    }
+    for (n, &s) in near.iter_mut().zip(status) {
+        *n &= s != MatchStatus::OutOfRoi;
+    }
+    near
+}
+
+/// Replaces the result near depth edges with a smaller-window match (see
+/// [`StereoMatcherConfig::edge_windows`]), matching only the box around those pixels.
+fn rematch_near_edges(
+    left: &Image<f32>,
+    right: &Image<f32>,
+    config: &StereoMatcherConfig,
+    edge: &EdgeWindows,
+    result: &mut StereoResult,
+) -> Result<(), StereoError> {
+    let w = left.width() as usize;
+    let near = near_depth_edges(result, edge.step_px, config.window_radius_px as usize);
+    let (mut u0, mut v0, mut u1, mut v1) = (usize::MAX, usize::MAX, 0, 0);
+    for (i, _) in near.iter().enumerate().filter(|(_, n)| **n) {
+        let (u, v) = (i % w, i / w);
+        (u0, v0, u1, v1) = (u0.min(u), v0.min(v), u1.max(u), v1.max(v));
+    }
+    if u0 > u1 {
+        return Ok(());
+    }
+    let small_config = StereoMatcherConfig {
+        window_radius_px: edge.window_radius_px,
+        edge_windows: None,
+        speckle: None,
+        ..*config
+    };
+    let bbox = PixelRect::new(
+        u0 as u32,
+        v0 as u32,
+        (u1 - u0 + 1) as u32,
+        (v1 - v0 + 1) as u32,
+    );
+    let small = match_windows(left, right, &small_config, Some(bbox))?;
+    for (i, _) in near.iter().enumerate().filter(|(_, n)| **n) {
+        result.disparity_px.data_mut()[i] = small.disparity_px.data()[i];
+        result.status.data_mut()[i] = small.status.data()[i];
+        result.correlation.data_mut()[i] = small.correlation.data()[i];
+    }
+    Ok(())
+}
+
+/// One window size's matching over `roi`, without the speckle pass.
+fn match_windows(
+    left: &Image<f32>,
+    right: &Image<f32>,
+    config: &StereoMatcherConfig,
+    roi: Option<PixelRect>,
+) -> Result<StereoResult, StereoError> {
     let (width, height) = (left.width(), left.height());
     if (right.width(), right.height()) != (width, height) {
         return Err(StereoError::SizeMismatch {
@@ -95,9 +222,6 @@ pub fn match_stereo(
             });
     }
 
-    if let Some(filter) = &config.speckle {
-        remove_speckles(disparity_px.data_mut(), status.data_mut(), w, &roi, filter);
-    }
     Ok(StereoResult {
         disparity_px,
         status,
