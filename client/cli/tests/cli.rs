@@ -216,6 +216,89 @@ fn capture_writes_a_bop_scene_that_reads_back() {
 }
 
 #[test]
+fn capture_exposure_stack_writes_the_calibration_layout() {
+    use glint_camera::dataset::ExposureStackFiles;
+    use glint_camera::dataset::bop::BopSceneReader;
+    use glint_camera::dataset::rig_file::{read_gt_sensor_json, read_rig_json};
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("stack");
+    let o = glint(&[
+        "capture",
+        "--part",
+        "gear",
+        "--instances",
+        "3",
+        "--views",
+        "1",
+        "--resolution",
+        "160x128",
+        "--spp",
+        "1",
+        "--exposure-stack",
+        "4,0.5,1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let scene_dir = out.join("test/000001");
+    let stack = ExposureStackFiles::read(scene_dir.join("glint/exposure_stack/000000")).unwrap();
+    assert_eq!(stack.exposures_s, vec![0.5e-3, 1e-3, 4e-3]);
+    assert_eq!(
+        (stack.pattern.as_str(), stack.camera.as_str()),
+        ("white", "left")
+    );
+    assert_eq!(stack.bit_depth, 8);
+    assert_eq!(stack.images.len(), 3);
+    // The same radiance read out 8× longer: brighter on average, pixel for pixel mostly.
+    let mean = |k: usize| {
+        stack.images[k]
+            .data()
+            .iter()
+            .map(|&d| d as f64)
+            .sum::<f64>()
+    };
+    assert!(mean(2) > 2.0 * mean(0), "{} vs {}", mean(2), mean(0));
+    let gt = glint_render::exr_io::read_exr(
+        &scene_dir.join("glint/exposure_stack/000000/gt_left_radiance.exr"),
+    )
+    .unwrap();
+    assert_eq!(gt[0].0, "gt_left_radiance");
+    assert_eq!((gt[0].1.width(), gt[0].1.height()), (160, 128));
+    let rig = read_rig_json(&scene_dir.join("glint/rig.json")).unwrap();
+    assert_eq!(rig.stereo.intrinsics.width_px, 160);
+    assert!((rig.stereo.baseline_m - 0.10118).abs() < 1e-9);
+    let sensor = read_gt_sensor_json(&scene_dir.join("glint/gt_sensor.json")).unwrap();
+    assert_eq!(sensor.bit_depth, stack.bit_depth);
+    // The BOP files of the same view: camera pose, GT poses and masks.
+    let scene = BopSceneReader::open(&scene_dir).unwrap();
+    assert_eq!(scene.image_ids(), vec![0]);
+    let camera = scene.camera(0).unwrap();
+    assert_eq!(camera.intrinsics.width_px, 160);
+    assert!(camera.t_c_w.is_some());
+    let gts = scene.gt(0).unwrap();
+    assert!(!gts.is_empty());
+    assert_eq!(scene.gt_info(0).unwrap().len(), gts.len());
+    let mask = scene
+        .mask(0, 0, glint_camera::dataset::bop::MaskKind::Full)
+        .unwrap();
+    assert_eq!((mask.width(), mask.height()), (160, 128));
+
+    let err = fails_cleanly(
+        &glint(&[
+            "capture",
+            "--part",
+            "gear",
+            "--exposure-stack",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+        ]),
+        2,
+    );
+    assert!(err.contains("at least 2"), "{err}");
+}
+
+#[test]
 fn render_bench_exports_a_scene_for_mitsuba() {
     use glint_geometry::LengthUnit;
     use glint_geometry::io::read_mesh;
@@ -287,78 +370,4 @@ fn render_bench_exports_a_scene_for_mitsuba() {
         assert!(s.is_finite() && *s >= 0.0);
         assert!(*m >= s * (1.0 - 1e-5), "multi-path {m} < single-path {s}");
     }
-fn capture_exposure_stack_writes_the_calibration_layout() {
-    use glint_camera::dataset::ExposureStackFiles;
-    use glint_camera::dataset::bop::BopSceneReader;
-    use glint_camera::dataset::rig_file::{read_gt_sensor_json, read_rig_json};
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("stack");
-    let o = glint(&[
-        "capture",
-        "--part",
-        "gear",
-        "--instances",
-        "3",
-        "--views",
-        "1",
-        "--resolution",
-        "160x128",
-        "--spp",
-        "1",
-        "--exposure-stack",
-        "4,0.5,1",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let scene_dir = out.join("test/000001");
-    let stack = ExposureStackFiles::read(scene_dir.join("glint/exposure_stack/000000")).unwrap();
-    assert_eq!(stack.exposures_s, vec![0.5e-3, 1e-3, 4e-3]);
-    assert_eq!(
-        (stack.pattern.as_str(), stack.camera.as_str()),
-        ("white", "left")
-    );
-    assert_eq!(stack.bit_depth, 8);
-    assert_eq!(stack.images.len(), 3);
-    // The same radiance read out 8× longer: brighter on average, pixel for pixel mostly.
-    let mean = |k: usize| {
-        stack.images[k]
-            .data()
-            .iter()
-            .map(|&d| d as f64)
-            .sum::<f64>()
-    };
-    assert!(mean(2) > 2.0 * mean(0), "{} vs {}", mean(2), mean(0));
-    let rig = read_rig_json(&scene_dir.join("glint/rig.json")).unwrap();
-    assert_eq!(rig.stereo.intrinsics.width_px, 160);
-    assert!((rig.stereo.baseline_m - 0.10118).abs() < 1e-9);
-    let sensor = read_gt_sensor_json(&scene_dir.join("glint/gt_sensor.json")).unwrap();
-    assert_eq!(sensor.bit_depth, stack.bit_depth);
-    // The BOP files of the same view: camera pose, GT poses and masks.
-    let scene = BopSceneReader::open(&scene_dir).unwrap();
-    assert_eq!(scene.image_ids(), vec![0]);
-    let camera = scene.camera(0).unwrap();
-    assert_eq!(camera.intrinsics.width_px, 160);
-    assert!(camera.t_c_w.is_some());
-    let gts = scene.gt(0).unwrap();
-    assert!(!gts.is_empty());
-    assert_eq!(scene.gt_info(0).unwrap().len(), gts.len());
-    let mask = scene
-        .mask(0, 0, glint_camera::dataset::bop::MaskKind::Full)
-        .unwrap();
-    assert_eq!((mask.width(), mask.height()), (160, 128));
-
-    let err = fails_cleanly(
-        &glint(&[
-            "capture",
-            "--part",
-            "gear",
-            "--exposure-stack",
-            "1",
-            "--out",
-            out.to_str().unwrap(),
-        ]),
-        2,
-    );
-    assert!(err.contains("at least 2"), "{err}");
 }

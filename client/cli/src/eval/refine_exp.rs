@@ -310,9 +310,13 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
     let objects = objects(args)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let rig = glint_render::rig::SliRig::ensenso_n35().resized(args.resolution.0, args.resolution.1)?;
+    let rig =
+        glint_render::rig::SliRig::ensenso_n35().resized(args.resolution.0, args.resolution.1)?;
     let spec = SceneSpec {
-        matcher: format!("{:?}", glint_camera::capture::CaptureConfig::for_rig(&rig)?.matcher),
+        matcher: format!(
+            "{:?}",
+            glint_camera::capture::CaptureConfig::for_rig(&rig)?.matcher
+        ),
         instances: args.instances,
         views: args.views_per_scene,
         width_px: args.resolution.0,
