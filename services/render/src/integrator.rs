@@ -17,9 +17,9 @@ use nalgebra::{Isometry3, Vector3};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
-use crate::bsdf::{self, ShadingFrame};
+use crate::bsdf::{self, BsdfScalar, PrincipledParams, ShadingFrame};
 use crate::projector::Projector;
-use crate::scene::{RAY_EPSILON_M, Scene};
+use crate::scene::{Hit, RAY_EPSILON_M, Scene};
 
 /// Which light paths a render follows.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -118,11 +118,7 @@ pub fn render(
                     } else {
                         (rng.random::<f32>(), rng.random::<f32>())
                     };
-                    let x = (u as f32 + ju - k.cx_px as f32) / k.fx_px as f32;
-                    let y = (v as f32 + jv - k.cy_px as f32) / k.fy_px as f32;
-                    let d_c = Vector3::new(x, y, 1.0).normalize();
-                    let d_w = rotation * d_c;
-                    let direction = Vec3A::new(d_w.x, d_w.y, d_w.z);
+                    let (d_c, direction) = camera_ray(k, &rotation, u as f32 + ju, v as f32 + jv);
                     let path = trace(
                         scene,
                         projector,
@@ -151,6 +147,104 @@ pub fn render(
         label: Image::new(w, h, label).expect("sized from the intrinsics"),
         rays_traced,
     }
+}
+
+/// The camera ray through continuous pixel coordinates (u, v) (pixel centres at +0.5): its unit
+/// direction in the camera frame and in the world (`rotation` = R_w_c).
+#[inline]
+fn camera_ray(
+    k: &PinholeIntrinsics,
+    rotation: &nalgebra::Matrix3<f32>,
+    u: f32,
+    v: f32,
+) -> (Vector3<f32>, Vec3A) {
+    let x = (u - k.cx_px as f32) / k.fx_px as f32;
+    let y = (v - k.cy_px as f32) / k.fy_px as f32;
+    let d_c = Vector3::new(x, y, 1.0).normalize();
+    let d_w = rotation * d_c;
+    (d_c, Vec3A::new(d_w.x, d_w.y, d_w.z))
+}
+
+/// The projector's direct light reflected at `hit` towards `towards_previous` (local frame): the
+/// point emitter's intensity / d² times f·cos θ (the rendering equation's integrand for a point
+/// light), 0 where the projector does not light the point, is below the horizon or is shadowed.
+/// Returns the radiance and the shadow rays traced (0 or 1).
+///
+/// This is *the* shading of both integrators, generic over the BSDF scalar: with `f32` for
+/// rendering and with dual numbers for the BSDF fit, so that fit and camera share one code path.
+#[inline]
+pub fn direct_light<T: BsdfScalar>(
+    scene: &Scene,
+    projector: &Projector,
+    hit: &Hit,
+    frame: &ShadingFrame,
+    towards_previous: glam::Vec3,
+    material: &PrincipledParams<T>,
+) -> (T, u64) {
+    let zero = T::from(0.0);
+    let Some(light) = projector.illuminate(hit.point) else {
+        return (zero, 0);
+    };
+    let towards_light = frame.to_local(light.direction.into());
+    if towards_light.z <= 0.0 {
+        return (zero, 0);
+    }
+    let lifted = hit.point + hit.normal * RAY_EPSILON_M;
+    if scene.occluded(lifted, light.direction, light.distance_m - 2.0 * RAY_EPSILON_M) {
+        return (zero, 1);
+    }
+    let f_cos = bsdf::eval(material, towards_previous, towards_light);
+    (
+        f_cos * (light.intensity_w_per_sr / (light.distance_m * light.distance_m)),
+        1,
+    )
+}
+
+/// What one single-path camera ray sees (the paper's I_single): the first surface lit directly
+/// by the projector.
+#[derive(Clone, Copy, Debug)]
+pub struct SinglePathSample<T> {
+    /// Radiance, W·sr⁻¹·m⁻².
+    pub radiance: T,
+    /// Scene index of the instance hit.
+    pub instance: u32,
+    /// Depth z of the hit in the camera frame, metres.
+    pub depth_m: f32,
+}
+
+/// The single-path radiance through the centre of pixel (u, v), shading the hit with
+/// `material(instance)` instead of the scene's own material: the same ray generation,
+/// intersection and [`direct_light`] as [`render`] with [`LightTransport::SinglePath`] (which
+/// gives the same value for `material = |i| scene material`), generic so that the BSDF fit gets
+/// exact derivatives from dual-number materials. `None` where the ray hits nothing.
+pub fn single_path_pixel<T: BsdfScalar>(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    u: u32,
+    v: u32,
+    material: impl Fn(u32) -> PrincipledParams<T>,
+) -> Option<SinglePathSample<T>> {
+    let rotation = camera.t_w_c.rotation.to_rotation_matrix().matrix().cast::<f32>();
+    let origin = camera.t_w_c.translation.vector.cast::<f32>();
+    let origin = Vec3A::new(origin.x, origin.y, origin.z);
+    let (d_c, direction) = camera_ray(&camera.intrinsics, &rotation, u as f32 + 0.5, v as f32 + 0.5);
+    let hit = scene.intersect(origin, direction, f32::INFINITY)?;
+    let frame = ShadingFrame::from_normal(hit.normal.into());
+    let towards_previous = frame.to_local((-direction).into());
+    let (radiance, _) = direct_light(
+        scene,
+        projector,
+        &hit,
+        &frame,
+        towards_previous,
+        &material(hit.instance),
+    );
+    Some(SinglePathSample {
+        radiance,
+        instance: hit.instance,
+        depth_m: hit.t * d_c.z,
+    })
 }
 
 struct PathResult {
@@ -198,21 +292,9 @@ fn trace(
         let lifted = hit.point + hit.normal * RAY_EPSILON_M;
 
         // Next-event estimation: the projector is a point, so this is its only contribution.
-        if let Some(light) = projector.illuminate(hit.point) {
-            let towards_light = frame.to_local(light.direction.into());
-            if towards_light.z > 0.0 {
-                result.rays += 1;
-                if !scene.occluded(
-                    lifted,
-                    light.direction,
-                    light.distance_m - 2.0 * RAY_EPSILON_M,
-                ) {
-                    let f_cos = bsdf::eval(material, towards_previous, towards_light);
-                    result.radiance += throughput * f_cos * light.intensity_w_per_sr
-                        / (light.distance_m * light.distance_m);
-                }
-            }
-        }
+        let (direct, shadow_rays) = direct_light(scene, projector, &hit, &frame, towards_previous, material);
+        result.rays += shadow_rays;
+        result.radiance += throughput * direct;
         if bounce + 1 == max_bounces {
             break;
         }
@@ -248,7 +330,6 @@ fn trace(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bsdf::PrincipledParams;
     use crate::projector::Pattern;
     use crate::scene::SceneInstance;
     use glint_geometry::TriMesh;
@@ -333,6 +414,37 @@ mod tests {
             }
         }
         assert!(worst < 0.01, "worst relative error {worst}");
+    }
+
+    #[test]
+    fn single_path_pixel_is_the_renderers_single_path() {
+        let (scene, camera, projector) = corner_scene();
+        let settings = RenderSettings {
+            transport: LightTransport::SinglePath,
+            samples_per_pixel: 1,
+            roi: None,
+            seed: 1,
+        };
+        let out = render(&scene, &camera, &projector, &settings);
+        let mut hits = 0;
+        for v in (0..128).step_by(7) {
+            for u in (0..160).step_by(7) {
+                let own = |i: u32| *scene.material_of(i);
+                match single_path_pixel(&scene, &camera, &projector, u, v, own) {
+                    Some(s) => {
+                        hits += 1;
+                        assert_eq!(s.radiance, out.radiance.get(u, v).unwrap(), "({u}, {v})");
+                        assert_eq!(s.depth_m, out.depth_m.get(u, v).unwrap());
+                    }
+                    None => assert!(out.depth_m.get(u, v).unwrap().is_nan()),
+                }
+            }
+        }
+        assert!(hits > 50, "{hits}");
+        // With dual numbers the value is the same and the derivative is the BSDF's.
+        let lift = |i: u32| scene.material_of(i).map(num_dual::Dual32::from_re);
+        let s = single_path_pixel(&scene, &camera, &projector, 80, 64, lift).unwrap();
+        assert_eq!(s.radiance.re, out.radiance.get(80, 64).unwrap());
     }
 
     #[test]
