@@ -3,8 +3,9 @@
 //!   and radiance maps E = g⁻¹(I)/Δt;
 //! - [`bsdf_fit`]: principled-BSDF parameters by differentiable rendering (dual numbers
 //!   through the renderer's own single-path shading), L2 loss, Adam;
-//! - plots as PNG ([`plot`]).
+//! - the calibration scene file ([`scene_file`]) and plots as PNG ([`plot`]).
 
 pub mod bsdf_fit;
 pub mod plot;
 pub mod response;
+pub mod scene_file;

@@ -126,6 +126,7 @@ pub fn render(
                         direction,
                         settings.transport,
                         &mut rng,
+                        &|i| *scene.material_of(i),
                     );
                     rays += path.rays;
                     sum += path.radiance;
@@ -190,7 +191,11 @@ pub fn direct_light<T: BsdfScalar>(
         return (zero, 0);
     }
     let lifted = hit.point + hit.normal * RAY_EPSILON_M;
-    if scene.occluded(lifted, light.direction, light.distance_m - 2.0 * RAY_EPSILON_M) {
+    if scene.occluded(
+        lifted,
+        light.direction,
+        light.distance_m - 2.0 * RAY_EPSILON_M,
+    ) {
         return (zero, 1);
     }
     let f_cos = bsdf::eval(material, towards_previous, towards_light);
@@ -225,10 +230,20 @@ pub fn single_path_pixel<T: BsdfScalar>(
     v: u32,
     material: impl Fn(u32) -> PrincipledParams<T>,
 ) -> Option<SinglePathSample<T>> {
-    let rotation = camera.t_w_c.rotation.to_rotation_matrix().matrix().cast::<f32>();
+    let rotation = camera
+        .t_w_c
+        .rotation
+        .to_rotation_matrix()
+        .matrix()
+        .cast::<f32>();
     let origin = camera.t_w_c.translation.vector.cast::<f32>();
     let origin = Vec3A::new(origin.x, origin.y, origin.z);
-    let (d_c, direction) = camera_ray(&camera.intrinsics, &rotation, u as f32 + 0.5, v as f32 + 0.5);
+    let (d_c, direction) = camera_ray(
+        &camera.intrinsics,
+        &rotation,
+        u as f32 + 0.5,
+        v as f32 + 0.5,
+    );
     let hit = scene.intersect(origin, direction, f32::INFINITY)?;
     let frame = ShadingFrame::from_normal(hit.normal.into());
     let towards_previous = frame.to_local((-direction).into());
@@ -247,23 +262,84 @@ pub fn single_path_pixel<T: BsdfScalar>(
     })
 }
 
-struct PathResult {
-    radiance: f32,
+struct PathResult<T> {
+    radiance: T,
     /// Distance along the camera ray and instance of the first hit.
     first_hit: Option<(f32, u32)>,
     rays: u64,
 }
 
+/// The radiance through pixel (u, v) with `transport` and `samples_per_pixel` (the first
+/// through the centre, the rest jittered; the pixel's own RNG stream from `seed`), shading each
+/// hit with `material(instance)`: the estimator of [`render`], generic so that dual-number
+/// materials give derivatives (see `trace` for the detached sampling density). `instance` and
+/// `depth_m` are the centre ray's; `None` if the centre ray hits nothing.
+#[allow(clippy::too_many_arguments)]
+pub fn path_pixel<T: BsdfScalar>(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    u: u32,
+    v: u32,
+    transport: LightTransport,
+    samples_per_pixel: u32,
+    seed: u64,
+    material: impl Fn(u32) -> PrincipledParams<T>,
+) -> Option<SinglePathSample<T>> {
+    let rotation = camera
+        .t_w_c
+        .rotation
+        .to_rotation_matrix()
+        .matrix()
+        .cast::<f32>();
+    let origin = camera.t_w_c.translation.vector.cast::<f32>();
+    let origin = Vec3A::new(origin.x, origin.y, origin.z);
+    let pixel = v as u64 * camera.intrinsics.width_px as u64 + u as u64;
+    let mut rng = rand_pcg::Pcg32::seed_from_u64(seed ^ pixel.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    let spp = samples_per_pixel.max(1);
+    let mut sum = T::from(0.0);
+    let mut centre = None;
+    for s in 0..spp {
+        let (ju, jv) = if s == 0 {
+            (0.5, 0.5)
+        } else {
+            (rng.random::<f32>(), rng.random::<f32>())
+        };
+        let (d_c, direction) =
+            camera_ray(&camera.intrinsics, &rotation, u as f32 + ju, v as f32 + jv);
+        let path = trace(
+            scene, projector, origin, direction, transport, &mut rng, &material,
+        );
+        if s == 0 {
+            centre = path.first_hit.map(|(t, instance)| (t * d_c.z, instance));
+        }
+        sum += path.radiance;
+    }
+    let (depth_m, instance) = centre?;
+    Some(SinglePathSample {
+        radiance: sum * (spp as f32).recip(),
+        instance,
+        depth_m,
+    })
+}
+
 /// One camera path.
 #[inline]
-fn trace(
+///
+/// Generic over the BSDF scalar, with `material(instance)` shading each hit: directions are
+/// sampled from the real parts of the materials and the throughput is f·cos / pdf with the pdf
+/// held constant, so with dual numbers the derivative of the estimate is an unbiased estimate of
+/// the radiance's derivative (the sampling density is detached, as in differentiable path
+/// tracers). With `f32` the throughput factor is the sample's own weight, as always.
+fn trace<T: BsdfScalar>(
     scene: &Scene,
     projector: &Projector,
     origin: Vec3A,
     direction: Vec3A,
     transport: LightTransport,
     rng: &mut impl Rng,
-) -> PathResult {
+    material: &impl Fn(u32) -> PrincipledParams<T>,
+) -> PathResult<T> {
     let (max_bounces, roulette_after) = match transport {
         LightTransport::SinglePath => (1, u32::MAX),
         LightTransport::MultiPath {
@@ -272,11 +348,11 @@ fn trace(
         } => (max_bounces.max(1), roulette_after),
     };
     let mut result = PathResult {
-        radiance: 0.0,
+        radiance: T::from(0.0),
         first_hit: None,
         rays: 0,
     };
-    let mut throughput = 1.0f32;
+    let mut throughput = T::from(1.0);
     let (mut origin, mut direction) = (origin, direction);
     for bounce in 0..max_bounces {
         result.rays += 1;
@@ -286,35 +362,40 @@ fn trace(
         if bounce == 0 {
             result.first_hit = Some((hit.t, hit.instance));
         }
-        let material = scene.material_of(hit.instance);
+        let material = material(hit.instance);
         let frame = ShadingFrame::from_normal(hit.normal.into());
         let towards_previous = frame.to_local((-direction).into());
         let lifted = hit.point + hit.normal * RAY_EPSILON_M;
 
         // Next-event estimation: the projector is a point, so this is its only contribution.
-        let (direct, shadow_rays) = direct_light(scene, projector, &hit, &frame, towards_previous, material);
+        let (direct, shadow_rays) =
+            direct_light(scene, projector, &hit, &frame, towards_previous, &material);
         result.rays += shadow_rays;
         result.radiance += throughput * direct;
         if bounce + 1 == max_bounces {
             break;
         }
         let Some(sample) = bsdf::sample(
-            material,
+            &material.re(),
             towards_previous,
             rng.random(),
             [rng.random(), rng.random()],
         ) else {
             break;
         };
-        throughput *= sample.weight;
+        throughput *= if T::NDERIV == 0 {
+            T::from(sample.weight)
+        } else {
+            bsdf::eval(&material, towards_previous, sample.wo) * sample.pdf.recip()
+        };
         if bounce + 1 >= roulette_after {
-            let survive = throughput.min(0.95);
+            let survive = throughput.re().min(0.95);
             if survive <= 0.0 || rng.random::<f32>() >= survive {
                 break;
             }
-            throughput /= survive;
+            throughput *= survive.recip();
         }
-        if !(throughput > 0.0 && throughput.is_finite()) {
+        if !(throughput.re() > 0.0 && throughput.re().is_finite()) {
             break;
         }
         direction = Vec3A::from(frame.to_world(sample.wo));
@@ -445,6 +526,60 @@ mod tests {
         let lift = |i: u32| scene.material_of(i).map(num_dual::Dual32::from_re);
         let s = single_path_pixel(&scene, &camera, &projector, 80, 64, lift).unwrap();
         assert_eq!(s.radiance.re, out.radiance.get(80, 64).unwrap());
+    }
+
+    #[test]
+    fn path_pixel_estimates_what_render_estimates() {
+        let (scene, camera, projector) = corner_scene();
+        let transport = LightTransport::MULTI_PATH_DEFAULT;
+        let roi = PixelRect {
+            u_min: 48,
+            v_min: 32,
+            width: 64,
+            height: 64,
+        };
+        let settings = RenderSettings {
+            transport,
+            samples_per_pixel: 16,
+            roi: Some(roi),
+            seed: 3,
+        };
+        let out = render(&scene, &camera, &projector, &settings);
+        // Independent streams: per pixel the difference has mean 0 if both estimate the same
+        // radiance. Its mean over 4096 pixels is within a few standard errors of 0; the paths'
+        // throughputs (Russian roulette, glossy bounces) are heavy-tailed, so the bound is 6
+        // standard errors rather than a Gaussian 4.
+        let mut d = Vec::new();
+        for v in roi.v_min..roi.v_min + roi.height {
+            for u in roi.u_min..roi.u_min + roi.width {
+                let own = |i: u32| *scene.material_of(i);
+                let s = path_pixel(&scene, &camera, &projector, u, v, transport, 16, 9, own);
+                let a = s.map_or(0.0, |s| s.radiance) as f64;
+                d.push(a - out.radiance.get(u, v).unwrap() as f64);
+            }
+        }
+        let n = d.len() as f64;
+        let mean = d.iter().sum::<f64>() / n;
+        let sd = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        assert!(
+            mean.abs() < 6.0 * sd / n.sqrt(),
+            "mean difference {mean}, sd {sd}"
+        );
+        // Single-path through path_pixel is single_path_pixel.
+        let own = |i: u32| *scene.material_of(i);
+        let a = path_pixel(
+            &scene,
+            &camera,
+            &projector,
+            80,
+            64,
+            LightTransport::SinglePath,
+            1,
+            0,
+            own,
+        );
+        let b = single_path_pixel(&scene, &camera, &projector, 80, 64, own);
+        assert_eq!(a.map(|s| s.radiance), b.map(|s| s.radiance));
     }
 
     #[test]

@@ -16,13 +16,15 @@
 //!   [`FitConfig::fixed`] (default: their lobes off, as the mock camera's metals have them).
 
 mod plot;
+mod target;
 
 pub use plot::{error_map_png, fit_history_png};
+pub use target::{MeasuredTarget, TargetError, measured_target};
 
 use std::time::Instant;
 
 use glint_render::bsdf::PrincipledParams;
-use glint_render::integrator::{Camera, single_path_pixel};
+use glint_render::integrator::{Camera, LightTransport, path_pixel};
 use glint_render::projector::Projector;
 use glint_render::scene::Scene;
 use num_dual::Dual32;
@@ -100,7 +102,8 @@ pub struct FitResult {
     pub elapsed_s: f64,
 }
 
-/// What the fit renders: the scene, camera, projector and the instance being fitted.
+/// What the fit renders: the scene (other instances keep their own, known materials), camera,
+/// projector, the instance being fitted, and how pixels are rendered.
 pub struct FitProblem<'a> {
     pub scene: &'a Scene,
     pub camera: Camera,
@@ -108,6 +111,26 @@ pub struct FitProblem<'a> {
     /// Scene index of the instance whose material is fitted.
     pub instance: u32,
     pub target: &'a FitTarget,
+    pub rendering: PixelRendering,
+}
+
+/// How the fit renders a pixel ([`glint_render::integrator::path_pixel`]). With multi-path,
+/// the same seed every iteration gives common random numbers: the loss is a deterministic
+/// function of the parameters apart from lobe-selection jumps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelRendering {
+    pub transport: LightTransport,
+    pub samples_per_pixel: u32,
+    pub seed: u64,
+}
+
+impl PixelRendering {
+    /// The direct reflection only, one ray through the pixel centre (the paper's I_single).
+    pub const SINGLE_PATH: Self = Self {
+        transport: LightTransport::SinglePath,
+        samples_per_pixel: 1,
+        seed: 0,
+    };
 }
 
 /// `fixed` with the free parameters replaced by `free`.
@@ -145,17 +168,44 @@ impl FitProblem<'_> {
         Ok(())
     }
 
+    /// Pixel (u, v) rendered with `params` on the fitted instance (and the scene's materials
+    /// elsewhere); `None` unless its centre ray hits the fitted instance.
+    fn shade<T: glint_render::bsdf::BsdfScalar>(
+        &self,
+        u: u32,
+        v: u32,
+        params: &PrincipledParams<T>,
+    ) -> Option<T> {
+        let r = &self.rendering;
+        let material = |i: u32| {
+            if i == self.instance {
+                *params
+            } else {
+                self.scene.material_of(i).map(|x| T::from(x))
+            }
+        };
+        path_pixel(
+            self.scene,
+            &self.camera,
+            self.projector,
+            u,
+            v,
+            r.transport,
+            r.samples_per_pixel,
+            r.seed,
+            material,
+        )
+        .filter(|s| s.instance == self.instance)
+        .map(|s| s.radiance)
+    }
+
     /// The rendered radiance of every target pixel for `params` (NaN where the pixel does not
     /// see the instance).
     pub fn render(&self, params: &PrincipledParams<f32>) -> Vec<f32> {
         self.target
             .pixels
             .par_iter()
-            .map(|&(u, v)| {
-                single_path_pixel(self.scene, &self.camera, self.projector, u, v, |_| *params)
-                    .filter(|s| s.instance == self.instance)
-                    .map_or(f32::NAN, |s| s.radiance)
-            })
+            .map(|&(u, v)| self.shade(u, v, params).unwrap_or(f32::NAN))
             .collect()
     }
 
@@ -187,18 +237,13 @@ impl FitProblem<'_> {
             .fold(
                 zero,
                 |(mut sse, mut grad, mut norm, mut n), (&(u, v), &t)| {
-                    let shade = |p: &PrincipledParams<Dual32>| {
-                        single_path_pixel(self.scene, &self.camera, self.projector, u, v, |_| *p)
-                            .filter(|s| s.instance == self.instance)
-                    };
-                    let sample = shade(&seeded[0]);
-                    if let Some(s) = sample.filter(|s| s.instance == self.instance) {
-                        let r = (s.radiance.re - t) as f64;
+                    if let Some(radiance) = self.shade(u, v, &seeded[0]) {
+                        let r = (radiance.re - t) as f64;
                         sse += r * r;
-                        grad[0] += 2.0 * r * s.radiance.eps as f64;
+                        grad[0] += 2.0 * r * radiance.eps as f64;
                         for (i, p) in seeded.iter().enumerate().skip(1) {
-                            // Same ray, same hit: only the seeded derivative differs.
-                            let d = shade(p).map_or(0.0, |s| s.radiance.eps);
+                            // Same rays, same random numbers: only the seeded derivative differs.
+                            let d = self.shade(u, v, p).map_or(0.0, |s| s.eps);
                             grad[i] += 2.0 * r * d as f64;
                         }
                         norm += (t as f64) * (t as f64);

@@ -4,6 +4,7 @@
 use super::*;
 use glint_geometry::TriMesh;
 use glint_geometry::camera::PinholeIntrinsics;
+use glint_render::integrator::single_path_pixel;
 use glint_render::projector::Pattern;
 use glint_render::scene::SceneInstance;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
@@ -77,6 +78,7 @@ fn gradient_matches_central_differences() {
         projector: &projector,
         instance: 0,
         target: &target,
+        rendering: PixelRendering::SINGLE_PATH,
     };
     let fixed = FitConfig::default().fixed;
     for at in [[0.5f32; FREE], [0.3, 0.7, 0.4, 0.2]] {
@@ -115,6 +117,7 @@ fn fit_of(truth: PrincipledParams<f32>) -> (FitResult, f64) {
         projector: &projector,
         instance: 0,
         target: &target,
+        rendering: PixelRendering::SINGLE_PATH,
     };
     let result = problem.fit(&FitConfig::default()).unwrap();
     let rendered = problem.render(&result.params);
@@ -197,6 +200,7 @@ fn bad_problems_are_rejected() {
         projector: &projector,
         instance: 0,
         target: &target,
+        rendering: PixelRendering::SINGLE_PATH,
     };
     assert_eq!(
         problem.fit(&FitConfig::default()).unwrap_err(),
