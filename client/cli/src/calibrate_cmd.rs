@@ -65,6 +65,20 @@ pub struct BsdfArgs {
     pub pixel_step: u32,
 }
 
+/// How to render pixels: `spp` samples with multi-path, one with single-path.
+fn rendering_of(transport: LightTransport, spp: u32, seed: u64) -> PixelRendering {
+    let samples_per_pixel = if transport == LightTransport::SinglePath {
+        1
+    } else {
+        spp
+    };
+    PixelRendering {
+        transport,
+        samples_per_pixel,
+        seed,
+    }
+}
+
 fn parse_transport(s: &str) -> Result<LightTransport, String> {
     match s {
         "single" => Ok(LightTransport::SinglePath),
@@ -315,15 +329,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
     let [camera, _] = loaded.rig.cameras(&loaded.t_w_c);
     let projector = loaded.rig.projector(&loaded.t_w_c, Pattern::White);
     let reference = loaded.file.reference().map_err(anyhow::Error::msg)?;
-    let rendering = PixelRendering {
-        transport: args.transport,
-        samples_per_pixel: if args.transport == LightTransport::SinglePath {
-            1
-        } else {
-            args.spp
-        },
-        seed: 1,
-    };
+    let rendering = rendering_of(args.transport, args.spp, 1);
     let measured = measured_target(
         &loaded.scene,
         &camera,
@@ -499,15 +505,7 @@ fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
         ("fitted view", loaded.t_w_c),
         ("held-out view", loaded.held_out_t_w_c),
     ] {
-        let rendering = PixelRendering {
-            transport: args.transport,
-            samples_per_pixel: if args.transport == LightTransport::SinglePath {
-                1
-            } else {
-                args.spp
-            },
-            seed: 7,
-        };
+        let rendering = rendering_of(args.transport, args.spp, 7);
         let (w, h, pixels, [fit, gt]) =
             part_radiance(&loaded, &t_w_c, [&fitted, &truth], &rendering);
         let err = relative_rms(&fit, &gt);

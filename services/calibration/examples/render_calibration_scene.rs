@@ -21,7 +21,6 @@ use glint_camera::{materials, views};
 use glint_geometry::parts::Part;
 use glint_render::projector::Pattern;
 use glint_render::rig::SliRig;
-use glint_render::sensor::Sensor;
 use nalgebra::Point3;
 
 /// Views look at the part from this distance, metres, within this cap half-angle, degrees.
@@ -76,18 +75,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let [left, _] = camera.render_pair(&views[0], Pattern::White, seed);
     let sensor = &camera.config.sensor;
-    let images = exposures_s
-        .iter()
-        .enumerate()
-        .map(|(j, &dt)| {
-            Sensor {
-                exposure_s: dt as f32,
-                ..sensor.clone()
-            }
-            .read_out(&left.radiance, seed.wrapping_mul(1000) + j as u64)
-        })
-        .collect();
-    let stack = ExposureStack::new(images, exposures_s, sensor.bit_depth)?;
+    let stack = ExposureStack::read_out(
+        sensor,
+        &left.radiance,
+        &exposures_s,
+        seed.wrapping_mul(1000),
+    )?;
     stack.save(&stack_dir, "white", "left")?;
 
     CalibrationScene {

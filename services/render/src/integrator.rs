@@ -73,6 +73,20 @@ pub struct Camera {
     pub t_w_c: Isometry3<f64>,
 }
 
+impl Camera {
+    /// R_w_c and the camera centre in the world, in the renderer's f32.
+    fn rotation_and_origin(&self) -> (nalgebra::Matrix3<f32>, Vec3A) {
+        let rotation = self
+            .t_w_c
+            .rotation
+            .to_rotation_matrix()
+            .matrix()
+            .cast::<f32>();
+        let origin = self.t_w_c.translation.vector.cast::<f32>();
+        (rotation, Vec3A::new(origin.x, origin.y, origin.z))
+    }
+}
+
 /// Renders what `camera` sees of `scene` under `projector`.
 pub fn render(
     scene: &Scene,
@@ -89,14 +103,7 @@ pub fn render(
     let mut radiance = vec![0f32; (w * h) as usize];
     let mut depth = vec![f32::NAN; (w * h) as usize];
     let mut label = vec![0u16; (w * h) as usize];
-    let rotation = camera
-        .t_w_c
-        .rotation
-        .to_rotation_matrix()
-        .matrix()
-        .cast::<f32>();
-    let origin = camera.t_w_c.translation.vector.cast::<f32>();
-    let origin = Vec3A::new(origin.x, origin.y, origin.z);
+    let (rotation, origin) = camera.rotation_and_origin();
     let spp = settings.samples_per_pixel.max(1);
     let rows = radiance
         .par_chunks_mut(w as usize)
@@ -230,14 +237,7 @@ pub fn single_path_pixel<T: BsdfScalar>(
     v: u32,
     material: impl Fn(u32) -> PrincipledParams<T>,
 ) -> Option<SinglePathSample<T>> {
-    let rotation = camera
-        .t_w_c
-        .rotation
-        .to_rotation_matrix()
-        .matrix()
-        .cast::<f32>();
-    let origin = camera.t_w_c.translation.vector.cast::<f32>();
-    let origin = Vec3A::new(origin.x, origin.y, origin.z);
+    let (rotation, origin) = camera.rotation_and_origin();
     let (d_c, direction) = camera_ray(
         &camera.intrinsics,
         &rotation,
@@ -286,14 +286,7 @@ pub fn path_pixel<T: BsdfScalar>(
     seed: u64,
     material: impl Fn(u32) -> PrincipledParams<T>,
 ) -> Option<SinglePathSample<T>> {
-    let rotation = camera
-        .t_w_c
-        .rotation
-        .to_rotation_matrix()
-        .matrix()
-        .cast::<f32>();
-    let origin = camera.t_w_c.translation.vector.cast::<f32>();
-    let origin = Vec3A::new(origin.x, origin.y, origin.z);
+    let (rotation, origin) = camera.rotation_and_origin();
     let pixel = v as u64 * camera.intrinsics.width_px as u64 + u as u64;
     let mut rng = rand_pcg::Pcg32::seed_from_u64(seed ^ pixel.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let spp = samples_per_pixel.max(1);
