@@ -180,6 +180,41 @@ impl TriMesh {
         }
     }
 
+    /// A UV sphere of radius `r` (metres) centred at the origin, with `n` segments around the z
+    /// axis (at least 4) and `n/2` rings: outward-facing, closed. Flat facets, so it doubles as a
+    /// test object with a dense, known spread of normals.
+    pub fn uv_sphere(r: f32, n: u32) -> Self {
+        let n = n.max(4);
+        let rings = n / 2;
+        let mut vertices = vec![Point3::new(0.0, 0.0, r)];
+        for k in 1..rings {
+            let theta = std::f32::consts::PI * k as f32 / rings as f32;
+            for i in 0..n {
+                let phi = std::f32::consts::TAU * i as f32 / n as f32;
+                vertices.push(Point3::new(
+                    r * theta.sin() * phi.cos(),
+                    r * theta.sin() * phi.sin(),
+                    r * theta.cos(),
+                ));
+            }
+        }
+        vertices.push(Point3::new(0.0, 0.0, -r));
+        let south = vertices.len() as u32 - 1;
+        let ring = |k: u32, i: u32| 1 + (k - 1) * n + i % n;
+        let mut triangles = Vec::new();
+        for i in 0..n {
+            triangles.push([0, ring(1, i), ring(1, i + 1)]);
+            triangles.push([south, ring(rings - 1, i + 1), ring(rings - 1, i)]);
+        }
+        for k in 1..rings - 1 {
+            for i in 0..n {
+                triangles.push([ring(k, i), ring(k + 1, i), ring(k + 1, i + 1)]);
+                triangles.push([ring(k, i), ring(k + 1, i + 1), ring(k, i + 1)]);
+            }
+        }
+        Self::new(vertices, triangles)
+    }
+
     /// An axis-aligned closed box around `centre` with `half_extents`, metres, faces outward.
     pub fn cuboid(centre: [f64; 3], half_extents: [f64; 3]) -> Self {
         let v = |x: f64, y: f64, z: f64| {

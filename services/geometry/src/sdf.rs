@@ -330,39 +330,6 @@ fn signed_distance(shells: &[Shell], p: glam::Vec3) -> f32 {
 pub(crate) mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
-    use std::f64::consts::PI;
-
-    /// A UV sphere of radius `r` with `n` segments around and `n/2` rings: outward, closed.
-    pub(crate) fn uv_sphere(r: f32, n: u32) -> TriMesh {
-        let rings = n / 2;
-        let mut vertices = vec![Point3::new(0.0, 0.0, r)];
-        for k in 1..rings {
-            let theta = PI as f32 * k as f32 / rings as f32;
-            for i in 0..n {
-                let phi = 2.0 * PI as f32 * i as f32 / n as f32;
-                vertices.push(Point3::new(
-                    r * theta.sin() * phi.cos(),
-                    r * theta.sin() * phi.sin(),
-                    r * theta.cos(),
-                ));
-            }
-        }
-        vertices.push(Point3::new(0.0, 0.0, -r));
-        let south = vertices.len() as u32 - 1;
-        let ring = |k: u32, i: u32| 1 + (k - 1) * n + i % n;
-        let mut triangles = Vec::new();
-        for i in 0..n {
-            triangles.push([0, ring(1, i), ring(1, i + 1)]);
-            triangles.push([south, ring(rings - 1, i + 1), ring(rings - 1, i)]);
-        }
-        for k in 1..rings - 1 {
-            for i in 0..n {
-                triangles.push([ring(k, i), ring(k + 1, i), ring(k + 1, i + 1)]);
-                triangles.push([ring(k, i), ring(k + 1, i + 1), ring(k, i + 1)]);
-            }
-        }
-        TriMesh::new(vertices, triangles)
-    }
 
     /// An axis-aligned box with half extents `e`, centred at the origin.
     pub(crate) fn cuboid(e: [f32; 3]) -> TriMesh {
@@ -394,7 +361,7 @@ pub(crate) mod tests {
         let r = 0.02;
         // 128 segments: chord sag r(1 − cos(π/128)) ≈ 6 µm, far below the half-voxel bound.
         let grid = SdfGrid::build(
-            &uv_sphere(r as f32, 128),
+            &TriMesh::uv_sphere(r as f32, 128),
             &SdfConfig {
                 voxel_size_m: H,
                 padding_m: 5e-3,
@@ -458,7 +425,7 @@ pub(crate) mod tests {
     #[test]
     fn gradient_is_the_derivative_of_the_value() {
         let grid = SdfGrid::build(
-            &uv_sphere(0.02, 64),
+            &TriMesh::uv_sphere(0.02, 64),
             &SdfConfig {
                 voxel_size_m: H,
                 padding_m: 4e-3,

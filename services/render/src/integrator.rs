@@ -13,13 +13,13 @@
 use glam::Vec3A;
 use glint_geometry::camera::PinholeIntrinsics;
 use glint_geometry::image::{Image, PixelRect};
-use nalgebra::{Isometry3, Matrix3, Vector3};
+use nalgebra::{Isometry3, Vector3};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
-use crate::bsdf::{self, ShadingFrame};
+use crate::bsdf::{self, BsdfScalar, PrincipledParams, ShadingFrame};
 use crate::projector::Projector;
-use crate::scene::{RAY_EPSILON_M, Scene};
+use crate::scene::{Hit, RAY_EPSILON_M, Scene};
 
 /// Which light paths a render follows.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -74,16 +74,16 @@ pub struct Camera {
 }
 
 impl Camera {
-    /// Camera → world rotation and the camera centre in the world, in f32 for ray generation.
-    fn rotation_and_centre(&self) -> (Matrix3<f32>, Vec3A) {
+    /// R_w_c and the camera centre in the world, in the renderer's f32.
+    fn rotation_and_origin(&self) -> (nalgebra::Matrix3<f32>, Vec3A) {
         let rotation = self
             .t_w_c
             .rotation
             .to_rotation_matrix()
             .matrix()
             .cast::<f32>();
-        let c = self.t_w_c.translation.vector.cast::<f32>();
-        (rotation, Vec3A::new(c.x, c.y, c.z))
+        let origin = self.t_w_c.translation.vector.cast::<f32>();
+        (rotation, Vec3A::new(origin.x, origin.y, origin.z))
     }
 }
 
@@ -103,7 +103,7 @@ pub fn render(
     let mut radiance = vec![0f32; (w * h) as usize];
     let mut depth = vec![f32::NAN; (w * h) as usize];
     let mut label = vec![0u16; (w * h) as usize];
-    let (rotation, origin) = camera.rotation_and_centre();
+    let (rotation, origin) = camera.rotation_and_origin();
     let spp = settings.samples_per_pixel.max(1);
     let rows = radiance
         .par_chunks_mut(w as usize)
@@ -125,7 +125,7 @@ pub fn render(
                     } else {
                         (rng.random::<f32>(), rng.random::<f32>())
                     };
-                    let (d_c, direction) = pixel_ray(k, &rotation, u, v as u32, ju, jv);
+                    let (d_c, direction) = camera_ray(k, &rotation, u as f32 + ju, v as f32 + jv);
                     let path = trace(
                         scene,
                         projector,
@@ -133,6 +133,7 @@ pub fn render(
                         direction,
                         settings.transport,
                         &mut rng,
+                        &|i| *scene.material_of(i),
                     );
                     rays += path.rays;
                     sum += path.radiance;
@@ -156,19 +157,17 @@ pub fn render(
     }
 }
 
-/// The ray through continuous pixel position `(u + ju, v + jv)`: its unit direction in the
-/// camera frame and in the world (`rotation` = camera → world).
+/// The camera ray through continuous pixel coordinates (u, v) (pixel centres at +0.5): its unit
+/// direction in the camera frame and in the world (`rotation` = R_w_c).
 #[inline]
-fn pixel_ray(
+fn camera_ray(
     k: &PinholeIntrinsics,
-    rotation: &Matrix3<f32>,
-    u: u32,
-    v: u32,
-    ju: f32,
-    jv: f32,
+    rotation: &nalgebra::Matrix3<f32>,
+    u: f32,
+    v: f32,
 ) -> (Vector3<f32>, Vec3A) {
-    let x = (u as f32 + ju - k.cx_px as f32) / k.fx_px as f32;
-    let y = (v as f32 + jv - k.cy_px as f32) / k.fy_px as f32;
+    let x = (u - k.cx_px as f32) / k.fx_px as f32;
+    let y = (v - k.cy_px as f32) / k.fy_px as f32;
     let d_c = Vector3::new(x, y, 1.0).normalize();
     let d_w = rotation * d_c;
     (d_c, Vec3A::new(d_w.x, d_w.y, d_w.z))
@@ -189,14 +188,14 @@ pub fn render_labels(
     let Some(roi) = roi.map_or(Some(PixelRect::full(w, h)), |r| r.clipped_to(w, h)) else {
         return Image::new(w, h, label).expect("sized from the intrinsics");
     };
-    let (rotation, origin) = camera.rotation_and_centre();
+    let (rotation, origin) = camera.rotation_and_origin();
     label
         .par_chunks_mut(w as usize)
         .enumerate()
         .filter(|(v, _)| (roi.v_min..roi.v_min + roi.height).contains(&(*v as u32)))
         .for_each(|(v, row)| {
             for u in roi.u_min..roi.u_min + roi.width {
-                let (_, direction) = pixel_ray(k, &rotation, u, v as u32, 0.5, 0.5);
+                let (_, direction) = camera_ray(k, &rotation, u as f32 + 0.5, v as f32 + 0.5);
                 let hit = match only_instance {
                     None => scene.intersect(origin, direction, f32::INFINITY),
                     Some(i) => scene.intersect_instance(origin, direction, f32::INFINITY, i),
@@ -209,23 +208,166 @@ pub fn render_labels(
     Image::new(w, h, label).expect("sized from the intrinsics")
 }
 
-struct PathResult {
-    radiance: f32,
+/// The projector's direct light reflected at `hit` towards `towards_previous` (local frame): the
+/// point emitter's intensity / d² times f·cos θ (the rendering equation's integrand for a point
+/// light), 0 where the projector does not light the point, is below the horizon or is shadowed.
+/// Returns the radiance and the shadow rays traced (0 or 1).
+///
+/// This is *the* shading of both integrators, generic over the BSDF scalar: with `f32` for
+/// rendering and with dual numbers for the BSDF fit, so that fit and camera share one code path.
+#[inline]
+pub fn direct_light<T: BsdfScalar>(
+    scene: &Scene,
+    projector: &Projector,
+    hit: &Hit,
+    frame: &ShadingFrame,
+    towards_previous: glam::Vec3,
+    material: &PrincipledParams<T>,
+) -> (T, u64) {
+    let zero = T::from(0.0);
+    let Some(light) = projector.illuminate(hit.point) else {
+        return (zero, 0);
+    };
+    let towards_light = frame.to_local(light.direction.into());
+    if towards_light.z <= 0.0 {
+        return (zero, 0);
+    }
+    let lifted = hit.point + hit.normal * RAY_EPSILON_M;
+    if scene.occluded(
+        lifted,
+        light.direction,
+        light.distance_m - 2.0 * RAY_EPSILON_M,
+    ) {
+        return (zero, 1);
+    }
+    let f_cos = bsdf::eval(material, towards_previous, towards_light);
+    (
+        f_cos * (light.intensity_w_per_sr / (light.distance_m * light.distance_m)),
+        1,
+    )
+}
+
+/// What one single-path camera ray sees (the paper's I_single): the first surface lit directly
+/// by the projector.
+#[derive(Clone, Copy, Debug)]
+pub struct SinglePathSample<T> {
+    /// Radiance, W·sr⁻¹·m⁻².
+    pub radiance: T,
+    /// Scene index of the instance hit.
+    pub instance: u32,
+    /// Depth z of the hit in the camera frame, metres.
+    pub depth_m: f32,
+}
+
+/// The single-path radiance through the centre of pixel (u, v), shading the hit with
+/// `material(instance)` instead of the scene's own material: the same ray generation,
+/// intersection and [`direct_light`] as [`render`] with [`LightTransport::SinglePath`] (which
+/// gives the same value for `material = |i| scene material`), generic so that the BSDF fit gets
+/// exact derivatives from dual-number materials. `None` where the ray hits nothing.
+pub fn single_path_pixel<T: BsdfScalar>(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    u: u32,
+    v: u32,
+    material: impl Fn(u32) -> PrincipledParams<T>,
+) -> Option<SinglePathSample<T>> {
+    let (rotation, origin) = camera.rotation_and_origin();
+    let (d_c, direction) = camera_ray(
+        &camera.intrinsics,
+        &rotation,
+        u as f32 + 0.5,
+        v as f32 + 0.5,
+    );
+    let hit = scene.intersect(origin, direction, f32::INFINITY)?;
+    let frame = ShadingFrame::from_normal(hit.normal.into());
+    let towards_previous = frame.to_local((-direction).into());
+    let (radiance, _) = direct_light(
+        scene,
+        projector,
+        &hit,
+        &frame,
+        towards_previous,
+        &material(hit.instance),
+    );
+    Some(SinglePathSample {
+        radiance,
+        instance: hit.instance,
+        depth_m: hit.t * d_c.z,
+    })
+}
+
+struct PathResult<T> {
+    radiance: T,
     /// Distance along the camera ray and instance of the first hit.
     first_hit: Option<(f32, u32)>,
     rays: u64,
 }
 
+/// The radiance through pixel (u, v) with `transport` and `samples_per_pixel` (the first
+/// through the centre, the rest jittered; the pixel's own RNG stream from `seed`), shading each
+/// hit with `material(instance)`: the estimator of [`render`], generic so that dual-number
+/// materials give derivatives (see `trace` for the detached sampling density). `instance` and
+/// `depth_m` are the centre ray's; `None` if the centre ray hits nothing.
+#[allow(clippy::too_many_arguments)]
+pub fn path_pixel<T: BsdfScalar>(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    u: u32,
+    v: u32,
+    transport: LightTransport,
+    samples_per_pixel: u32,
+    seed: u64,
+    material: impl Fn(u32) -> PrincipledParams<T>,
+) -> Option<SinglePathSample<T>> {
+    let (rotation, origin) = camera.rotation_and_origin();
+    let pixel = v as u64 * camera.intrinsics.width_px as u64 + u as u64;
+    let mut rng = rand_pcg::Pcg32::seed_from_u64(seed ^ pixel.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    let spp = samples_per_pixel.max(1);
+    let mut sum = T::from(0.0);
+    let mut centre = None;
+    for s in 0..spp {
+        let (ju, jv) = if s == 0 {
+            (0.5, 0.5)
+        } else {
+            (rng.random::<f32>(), rng.random::<f32>())
+        };
+        let (d_c, direction) =
+            camera_ray(&camera.intrinsics, &rotation, u as f32 + ju, v as f32 + jv);
+        let path = trace(
+            scene, projector, origin, direction, transport, &mut rng, &material,
+        );
+        if s == 0 {
+            centre = path.first_hit.map(|(t, instance)| (t * d_c.z, instance));
+        }
+        sum += path.radiance;
+    }
+    let (depth_m, instance) = centre?;
+    Some(SinglePathSample {
+        radiance: sum * (spp as f32).recip(),
+        instance,
+        depth_m,
+    })
+}
+
 /// One camera path.
 #[inline]
-fn trace(
+///
+/// Generic over the BSDF scalar, with `material(instance)` shading each hit: directions are
+/// sampled from the real parts of the materials and the throughput is f·cos / pdf with the pdf
+/// held constant, so with dual numbers the derivative of the estimate is an unbiased estimate of
+/// the radiance's derivative (the sampling density is detached, as in differentiable path
+/// tracers). With `f32` the throughput factor is the sample's own weight, as always.
+fn trace<T: BsdfScalar>(
     scene: &Scene,
     projector: &Projector,
     origin: Vec3A,
     direction: Vec3A,
     transport: LightTransport,
     rng: &mut impl Rng,
-) -> PathResult {
+    material: &impl Fn(u32) -> PrincipledParams<T>,
+) -> PathResult<T> {
     let (max_bounces, roulette_after) = match transport {
         LightTransport::SinglePath => (1, u32::MAX),
         LightTransport::MultiPath {
@@ -234,11 +376,11 @@ fn trace(
         } => (max_bounces.max(1), roulette_after),
     };
     let mut result = PathResult {
-        radiance: 0.0,
+        radiance: T::from(0.0),
         first_hit: None,
         rays: 0,
     };
-    let mut throughput = 1.0f32;
+    let mut throughput = T::from(1.0);
     let (mut origin, mut direction) = (origin, direction);
     for bounce in 0..max_bounces {
         result.rays += 1;
@@ -248,47 +390,40 @@ fn trace(
         if bounce == 0 {
             result.first_hit = Some((hit.t, hit.instance));
         }
-        let material = scene.material_of(hit.instance);
+        let material = material(hit.instance);
         let frame = ShadingFrame::from_normal(hit.normal.into());
         let towards_previous = frame.to_local((-direction).into());
         let lifted = hit.point + hit.normal * RAY_EPSILON_M;
 
         // Next-event estimation: the projector is a point, so this is its only contribution.
-        if let Some(light) = projector.illuminate(hit.point) {
-            let towards_light = frame.to_local(light.direction.into());
-            if towards_light.z > 0.0 {
-                result.rays += 1;
-                if !scene.occluded(
-                    lifted,
-                    light.direction,
-                    light.distance_m - 2.0 * RAY_EPSILON_M,
-                ) {
-                    let f_cos = bsdf::eval(material, towards_previous, towards_light);
-                    result.radiance += throughput * f_cos * light.intensity_w_per_sr
-                        / (light.distance_m * light.distance_m);
-                }
-            }
-        }
+        let (direct, shadow_rays) =
+            direct_light(scene, projector, &hit, &frame, towards_previous, &material);
+        result.rays += shadow_rays;
+        result.radiance += throughput * direct;
         if bounce + 1 == max_bounces {
             break;
         }
         let Some(sample) = bsdf::sample(
-            material,
+            &material.re(),
             towards_previous,
             rng.random(),
             [rng.random(), rng.random()],
         ) else {
             break;
         };
-        throughput *= sample.weight;
+        throughput *= if T::NDERIV == 0 {
+            T::from(sample.weight)
+        } else {
+            bsdf::eval(&material, towards_previous, sample.wo) * sample.pdf.recip()
+        };
         if bounce + 1 >= roulette_after {
-            let survive = throughput.min(0.95);
+            let survive = throughput.re().min(0.95);
             if survive <= 0.0 || rng.random::<f32>() >= survive {
                 break;
             }
-            throughput /= survive;
+            throughput *= survive.recip();
         }
-        if !(throughput > 0.0 && throughput.is_finite()) {
+        if !(throughput.re() > 0.0 && throughput.re().is_finite()) {
             break;
         }
         direction = Vec3A::from(frame.to_world(sample.wo));
@@ -304,7 +439,6 @@ fn trace(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bsdf::PrincipledParams;
     use crate::projector::Pattern;
     use crate::scene::SceneInstance;
     use glint_geometry::TriMesh;
@@ -389,6 +523,91 @@ mod tests {
             }
         }
         assert!(worst < 0.01, "worst relative error {worst}");
+    }
+
+    #[test]
+    fn single_path_pixel_is_the_renderers_single_path() {
+        let (scene, camera, projector) = corner_scene();
+        let settings = RenderSettings {
+            transport: LightTransport::SinglePath,
+            samples_per_pixel: 1,
+            roi: None,
+            seed: 1,
+        };
+        let out = render(&scene, &camera, &projector, &settings);
+        let mut hits = 0;
+        for v in (0..128).step_by(7) {
+            for u in (0..160).step_by(7) {
+                let own = |i: u32| *scene.material_of(i);
+                match single_path_pixel(&scene, &camera, &projector, u, v, own) {
+                    Some(s) => {
+                        hits += 1;
+                        assert_eq!(s.radiance, out.radiance.get(u, v).unwrap(), "({u}, {v})");
+                        assert_eq!(s.depth_m, out.depth_m.get(u, v).unwrap());
+                    }
+                    None => assert!(out.depth_m.get(u, v).unwrap().is_nan()),
+                }
+            }
+        }
+        assert!(hits > 50, "{hits}");
+        // With dual numbers the value is the same and the derivative is the BSDF's.
+        let lift = |i: u32| scene.material_of(i).map(num_dual::Dual32::from_re);
+        let s = single_path_pixel(&scene, &camera, &projector, 80, 64, lift).unwrap();
+        assert_eq!(s.radiance.re, out.radiance.get(80, 64).unwrap());
+    }
+
+    #[test]
+    fn path_pixel_estimates_what_render_estimates() {
+        let (scene, camera, projector) = corner_scene();
+        let transport = LightTransport::MULTI_PATH_DEFAULT;
+        let roi = PixelRect {
+            u_min: 48,
+            v_min: 32,
+            width: 64,
+            height: 64,
+        };
+        let settings = RenderSettings {
+            transport,
+            samples_per_pixel: 16,
+            roi: Some(roi),
+            seed: 3,
+        };
+        let out = render(&scene, &camera, &projector, &settings);
+        // Independent streams: per pixel the difference has mean 0 if both estimate the same
+        // radiance. Its mean over 4096 pixels is within a few standard errors of 0; the paths'
+        // throughputs (Russian roulette, glossy bounces) are heavy-tailed, so the bound is 6
+        // standard errors rather than a Gaussian 4.
+        let mut d = Vec::new();
+        for v in roi.v_min..roi.v_min + roi.height {
+            for u in roi.u_min..roi.u_min + roi.width {
+                let own = |i: u32| *scene.material_of(i);
+                let s = path_pixel(&scene, &camera, &projector, u, v, transport, 16, 9, own);
+                let a = s.map_or(0.0, |s| s.radiance) as f64;
+                d.push(a - out.radiance.get(u, v).unwrap() as f64);
+            }
+        }
+        let n = d.len() as f64;
+        let mean = d.iter().sum::<f64>() / n;
+        let sd = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        assert!(
+            mean.abs() < 6.0 * sd / n.sqrt(),
+            "mean difference {mean}, sd {sd}"
+        );
+        // Single-path through path_pixel is single_path_pixel.
+        let own = |i: u32| *scene.material_of(i);
+        let a = path_pixel(
+            &scene,
+            &camera,
+            &projector,
+            80,
+            64,
+            LightTransport::SinglePath,
+            1,
+            0,
+            own,
+        );
+        let b = single_path_pixel(&scene, &camera, &projector, 80, 64, own);
+        assert_eq!(a.map(|s| s.radiance), b.map(|s| s.radiance));
     }
 
     #[test]

@@ -84,6 +84,28 @@ impl ExposureStack {
         })
     }
 
+    /// A synthetic stack: `radiance` read out by `sensor` at each of `exposures_s` (seeded shot
+    /// and read noise, exposure j with seed `seed + j`). For tests and simulated captures.
+    pub fn read_out(
+        sensor: &glint_render::sensor::Sensor,
+        radiance: &Image<f32>,
+        exposures_s: &[f64],
+        seed: u64,
+    ) -> Result<Self, ResponseError> {
+        let images = exposures_s
+            .iter()
+            .enumerate()
+            .map(|(j, &dt)| {
+                glint_render::sensor::Sensor {
+                    exposure_s: dt as f32,
+                    ..sensor.clone()
+                }
+                .read_out(radiance, seed.wrapping_add(j as u64))
+            })
+            .collect();
+        Self::new(images, exposures_s.to_vec(), sensor.bit_depth)
+    }
+
     /// Loads `dir/stack.json` and the PNGs it names.
     pub fn load(dir: &Path) -> Result<Self, ResponseError> {
         let json_path = dir.join("stack.json");

@@ -37,18 +37,7 @@ fn exposures_s() -> Vec<f64> {
 }
 
 fn stack_of(radiance: &Image<f32>, sensor: &Sensor, seed: u64) -> ExposureStack {
-    let images = exposures_s()
-        .iter()
-        .enumerate()
-        .map(|(j, &dt)| {
-            Sensor {
-                exposure_s: dt as f32,
-                ..sensor.clone()
-            }
-            .read_out(radiance, seed + j as u64)
-        })
-        .collect();
-    ExposureStack::new(images, exposures_s(), sensor.bit_depth).unwrap()
+    ExposureStack::read_out(sensor, radiance, &exposures_s(), seed).unwrap()
 }
 
 /// The resolution of the data itself: the width, in ln X, of the widest single DN step of the

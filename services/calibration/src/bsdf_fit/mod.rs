@@ -1,0 +1,341 @@
+//! The principled-BSDF fit of §IV-B by differentiable rendering: with the projector, the
+//! camera and the object's pose known, find the BSDF parameters whose single-path render
+//! matches a target radiance map over the object's pixels.
+//!
+//! - Renderer: [`glint_render::integrator::single_path_pixel`], the camera's own ray
+//!   generation, intersection and shading ([`glint_render::integrator::direct_light`]),
+//!   evaluated with forward-mode dual numbers (`Dual32`, one pass per free parameter, each
+//!   seeding that parameter's derivative): each pixel's radiance and its exact derivatives with
+//!   respect to the four free parameters. (num-dual's vector duals would do it in one pass, but
+//!   need its `nalgebra` feature, which pulls in a second nalgebra.)
+//! - Loss: normalised L2, L = Σ_p (r_p − t_p)² / Σ_p t_p² (scale-free, so one learning rate
+//!   suits any radiance unit), over the object pixels with a finite target.
+//! - Optimiser: Adam (Kingma & Ba), every free parameter started at 0.5 as in the paper, each
+//!   step projected onto [0, 1] (the parameters' valid range).
+//! - Free parameters: base_color, metallic, roughness, specular; the others stay at
+//!   [`FitConfig::fixed`] (default: their lobes off, as the mock camera's metals have them).
+
+mod plot;
+mod target;
+
+pub use plot::{error_map_png, fit_history_png};
+pub use target::{MeasuredTarget, TargetError, measured_target};
+
+use std::time::Instant;
+
+use glint_render::bsdf::PrincipledParams;
+use glint_render::integrator::{Camera, LightTransport, path_pixel};
+use glint_render::projector::Projector;
+use glint_render::scene::Scene;
+use num_dual::Dual32;
+use rayon::prelude::*;
+
+/// Names of the free parameters, in the order of every `[f32; FREE]` here.
+pub const FREE_NAMES: [&str; FREE] = ["base_color", "metallic", "roughness", "specular"];
+/// Number of free parameters.
+pub const FREE: usize = 4;
+
+/// Why a fit could not run.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum FitError {
+    #[error("the target has {pixels} pixels but {values} radiance values")]
+    LengthMismatch { pixels: usize, values: usize },
+    #[error(
+        "none of the {pixels} target pixels sees instance {instance} with a finite, non-zero target"
+    )]
+    NoPixels { pixels: usize, instance: u32 },
+    #[error("instance {instance} is not in the scene ({instances} instances)")]
+    NoSuchInstance { instance: u32, instances: usize },
+    #[error("{0}")]
+    Config(String),
+}
+
+/// The object's pixels and their target radiance (same unit as the renderer, W·sr⁻¹·m⁻²).
+#[derive(Clone, Debug, Default)]
+pub struct FitTarget {
+    pub pixels: Vec<(u32, u32)>,
+    pub radiance: Vec<f32>,
+}
+
+/// Adam settings and the fixed parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitConfig {
+    pub iterations: usize,
+    /// Initial Adam step size; it decays geometrically to `final_learning_rate`.
+    pub learning_rate: f32,
+    pub final_learning_rate: f32,
+    pub beta1: f32,
+    pub beta2: f32,
+    /// The starting value of every free parameter (the paper's medium value 0.5).
+    pub start: f32,
+    /// Values of the parameters that are not free.
+    pub fixed: PrincipledParams<f32>,
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        Self {
+            iterations: 300,
+            learning_rate: 0.03,
+            final_learning_rate: 0.002,
+            beta1: 0.9,
+            beta2: 0.999,
+            start: 0.5,
+            fixed: PrincipledParams::new(0.5, 0.5, 0.5, 0.5).expect("constants are valid"),
+        }
+    }
+}
+
+/// A fit's outcome.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FitResult {
+    /// The fitted parameters (free ones fitted, the others as fixed).
+    #[serde(skip)]
+    pub params: PrincipledParams<f32>,
+    /// Loss before each step and after the last (iterations + 1 values).
+    pub loss: Vec<f64>,
+    /// Free parameters before each step and after the last.
+    pub trajectory: Vec<[f32; FREE]>,
+    /// Pixels that entered the loss.
+    pub pixels: usize,
+    /// Wall time of the fit, seconds.
+    pub elapsed_s: f64,
+}
+
+/// What the fit renders: the scene (other instances keep their own, known materials), camera,
+/// projector, the instance being fitted, and how pixels are rendered.
+pub struct FitProblem<'a> {
+    pub scene: &'a Scene,
+    pub camera: Camera,
+    pub projector: &'a Projector,
+    /// Scene index of the instance whose material is fitted.
+    pub instance: u32,
+    pub target: &'a FitTarget,
+    pub rendering: PixelRendering,
+}
+
+/// How the fit renders a pixel ([`glint_render::integrator::path_pixel`]). With multi-path,
+/// the same seed every iteration gives common random numbers: the loss is a deterministic
+/// function of the parameters apart from lobe-selection jumps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelRendering {
+    pub transport: LightTransport,
+    pub samples_per_pixel: u32,
+    pub seed: u64,
+}
+
+impl PixelRendering {
+    /// The direct reflection only, one ray through the pixel centre (the paper's I_single).
+    pub const SINGLE_PATH: Self = Self {
+        transport: LightTransport::SinglePath,
+        samples_per_pixel: 1,
+        seed: 0,
+    };
+}
+
+/// `fixed` with the free parameters replaced by `free`.
+pub fn with_free<T: Copy>(fixed: PrincipledParams<T>, free: [T; FREE]) -> PrincipledParams<T> {
+    PrincipledParams {
+        base_color: free[0],
+        metallic: free[1],
+        roughness: free[2],
+        specular: free[3],
+        ..fixed
+    }
+}
+
+/// The free parameters of `p`.
+pub fn free_of<T: Copy>(p: &PrincipledParams<T>) -> [T; FREE] {
+    [p.base_color, p.metallic, p.roughness, p.specular]
+}
+
+impl FitProblem<'_> {
+    fn check(&self) -> Result<(), FitError> {
+        let t = self.target;
+        if t.pixels.len() != t.radiance.len() {
+            return Err(FitError::LengthMismatch {
+                pixels: t.pixels.len(),
+                values: t.radiance.len(),
+            });
+        }
+        let instances = self.scene.instances().len();
+        if self.instance as usize >= instances {
+            return Err(FitError::NoSuchInstance {
+                instance: self.instance,
+                instances,
+            });
+        }
+        Ok(())
+    }
+
+    /// Pixel (u, v) rendered with `params` on the fitted instance (and the scene's materials
+    /// elsewhere); `None` unless its centre ray hits the fitted instance.
+    fn shade<T: glint_render::bsdf::BsdfScalar>(
+        &self,
+        u: u32,
+        v: u32,
+        params: &PrincipledParams<T>,
+    ) -> Option<T> {
+        let r = &self.rendering;
+        let material = |i: u32| {
+            if i == self.instance {
+                *params
+            } else {
+                self.scene.material_of(i).map(|x| T::from(x))
+            }
+        };
+        path_pixel(
+            self.scene,
+            &self.camera,
+            self.projector,
+            u,
+            v,
+            r.transport,
+            r.samples_per_pixel,
+            r.seed,
+            material,
+        )
+        .filter(|s| s.instance == self.instance)
+        .map(|s| s.radiance)
+    }
+
+    /// The rendered radiance of every target pixel for `params` (NaN where the pixel does not
+    /// see the instance).
+    pub fn render(&self, params: &PrincipledParams<f32>) -> Vec<f32> {
+        self.target
+            .pixels
+            .par_iter()
+            .map(|&(u, v)| self.shade(u, v, params).unwrap_or(f32::NAN))
+            .collect()
+    }
+
+    /// The loss and its gradient with respect to the free parameters at `free` (others fixed),
+    /// and the number of pixels that entered it.
+    pub fn loss_and_gradient(
+        &self,
+        fixed: &PrincipledParams<f32>,
+        free: [f32; FREE],
+    ) -> (f64, [f64; FREE], usize) {
+        // One material per free parameter, each carrying ∂/∂(that parameter).
+        let seeded: [PrincipledParams<Dual32>; FREE] = std::array::from_fn(|i| {
+            let lifted = std::array::from_fn(|j| {
+                if i == j {
+                    Dual32::new(free[j], 1.0)
+                } else {
+                    Dual32::from_re(free[j])
+                }
+            });
+            with_free(fixed.map(Dual32::from_re), lifted)
+        });
+        let zero = || (0.0f64, [0.0f64; FREE], 0.0f64, 0usize);
+        let (sse, grad, norm, n) = self
+            .target
+            .pixels
+            .par_iter()
+            .zip(&self.target.radiance)
+            .filter(|(_, t)| t.is_finite() && **t > 0.0)
+            .fold(
+                zero,
+                |(mut sse, mut grad, mut norm, mut n), (&(u, v), &t)| {
+                    if let Some(radiance) = self.shade(u, v, &seeded[0]) {
+                        let r = (radiance.re - t) as f64;
+                        sse += r * r;
+                        grad[0] += 2.0 * r * radiance.eps as f64;
+                        for (i, p) in seeded.iter().enumerate().skip(1) {
+                            // Same rays, same random numbers: only the seeded derivative differs.
+                            let d = self.shade(u, v, p).map_or(0.0, |s| s.eps);
+                            grad[i] += 2.0 * r * d as f64;
+                        }
+                        norm += (t as f64) * (t as f64);
+                        n += 1;
+                    }
+                    (sse, grad, norm, n)
+                },
+            )
+            .reduce(zero, |a, b| {
+                (
+                    a.0 + b.0,
+                    std::array::from_fn(|i| a.1[i] + b.1[i]),
+                    a.2 + b.2,
+                    a.3 + b.3,
+                )
+            });
+        if n == 0 || norm <= 0.0 {
+            return (f64::NAN, [0.0; FREE], 0);
+        }
+        (sse / norm, grad.map(|g| g / norm), n)
+    }
+
+    /// Runs Adam from `config.start` (see the module doc).
+    pub fn fit(&self, config: &FitConfig) -> Result<FitResult, FitError> {
+        self.fit_with_progress(config, |_, _| {})
+    }
+
+    /// [`FitProblem::fit`], calling `progress(iteration, loss)` after every step.
+    pub fn fit_with_progress(
+        &self,
+        config: &FitConfig,
+        mut progress: impl FnMut(usize, f64),
+    ) -> Result<FitResult, FitError> {
+        self.check()?;
+        let valid = config.iterations > 0
+            && config.learning_rate > 0.0
+            && config.final_learning_rate > 0.0
+            && (0.0..1.0).contains(&config.beta1)
+            && (0.0..1.0).contains(&config.beta2)
+            && (0.0..=1.0).contains(&config.start);
+        if !valid {
+            return Err(FitError::Config(format!(
+                "iterations must be ≥ 1, learning rates > 0, betas in [0, 1) and start in [0, 1]; got {config:?}"
+            )));
+        }
+        config
+            .fixed
+            .validated()
+            .map_err(|e| FitError::Config(format!("fixed parameters: {e}")))?;
+        let started = Instant::now();
+        let mut x = [config.start; FREE];
+        let (mut m, mut v) = ([0f64; FREE], [0f64; FREE]);
+        let mut loss = Vec::with_capacity(config.iterations + 1);
+        let mut trajectory = Vec::with_capacity(config.iterations + 1);
+        let decay = (config.final_learning_rate / config.learning_rate) as f64;
+        let mut pixels = 0;
+        for k in 0..config.iterations {
+            let (l, g, n) = self.loss_and_gradient(&config.fixed, x);
+            if n == 0 {
+                return Err(FitError::NoPixels {
+                    pixels: self.target.pixels.len(),
+                    instance: self.instance,
+                });
+            }
+            pixels = n;
+            loss.push(l);
+            trajectory.push(x);
+            let lr = config.learning_rate as f64
+                * decay.powf(k as f64 / (config.iterations.max(2) - 1) as f64);
+            let (b1, b2) = (config.beta1 as f64, config.beta2 as f64);
+            for i in 0..FREE {
+                m[i] = b1 * m[i] + (1.0 - b1) * g[i];
+                v[i] = b2 * v[i] + (1.0 - b2) * g[i] * g[i];
+                let m_hat = m[i] / (1.0 - b1.powi(k as i32 + 1));
+                let v_hat = v[i] / (1.0 - b2.powi(k as i32 + 1));
+                let step = lr * m_hat / (v_hat.sqrt() + 1e-10);
+                x[i] = ((x[i] as f64 - step).clamp(0.0, 1.0)) as f32;
+            }
+            progress(k, l);
+        }
+        let (l, _, _) = self.loss_and_gradient(&config.fixed, x);
+        loss.push(l);
+        trajectory.push(x);
+        Ok(FitResult {
+            params: with_free(config.fixed, x),
+            loss,
+            trajectory,
+            pixels,
+            elapsed_s: started.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests;

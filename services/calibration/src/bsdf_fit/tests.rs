@@ -1,0 +1,238 @@
+//! The fit against renders of known materials: dual-number gradients against central finite
+//! differences, and recovery from the paper's start at 0.5.
+
+use super::*;
+use glint_geometry::TriMesh;
+use glint_geometry::camera::PinholeIntrinsics;
+use glint_render::integrator::single_path_pixel;
+use glint_render::projector::Pattern;
+use glint_render::scene::SceneInstance;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+
+/// A sphere of radius 2 cm (128 segments) 0.4 m in front of a narrow 200 × 160 camera
+/// (≈ 100 px across): every normal facing the camera, so the lobes are sampled densely. Lit by
+/// a white projector 5 cm to the camera's right.
+fn sphere_setup() -> (Scene, Camera, Projector) {
+    let pose = Isometry3::from_parts(Translation3::new(0.0, 0.0, 0.4), UnitQuaternion::identity());
+    let scene = Scene::build(
+        &[TriMesh::uv_sphere(0.02, 128)],
+        vec![SceneInstance {
+            mesh: 0,
+            t_w_o: pose,
+            material: 0,
+            label: 1,
+        }],
+        vec![PrincipledParams::default()],
+    )
+    .unwrap();
+    let camera = Camera {
+        intrinsics: PinholeIntrinsics {
+            width_px: 200,
+            height_px: 160,
+            fx_px: 1000.0,
+            fy_px: 1000.0,
+            cx_px: 100.0,
+            cy_px: 80.0,
+        },
+        t_w_c: Isometry3::identity(),
+    };
+    let projector = Projector {
+        t_w_p: Isometry3::translation(0.05, 0.0, 0.0),
+        intrinsics: PinholeIntrinsics::ensenso_n35().resized(64, 64).unwrap(),
+        pattern: Pattern::White,
+        intensity_w_per_sr: 1.0,
+    };
+    (scene, camera, projector)
+}
+
+/// The target: every other pixel (in u and v) that sees the sphere, rendered with `truth` by
+/// the renderer.
+fn target_of(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    truth: &PrincipledParams<f32>,
+) -> FitTarget {
+    let mut target = FitTarget::default();
+    for v in (0..camera.intrinsics.height_px).step_by(2) {
+        for u in (0..camera.intrinsics.width_px).step_by(2) {
+            if let Some(s) = single_path_pixel(scene, camera, projector, u, v, |_| *truth) {
+                target.pixels.push((u, v));
+                target.radiance.push(s.radiance);
+            }
+        }
+    }
+    target
+}
+
+#[test]
+fn gradient_matches_central_differences() {
+    let (scene, camera, projector) = sphere_setup();
+    let truth = PrincipledParams::new(0.7, 0.4, 0.25, 0.6).unwrap();
+    let target = target_of(&scene, &camera, &projector, &truth);
+    // π (50 px)² / 4 ≈ 1960 pixels.
+    assert!(target.pixels.len() > 1800, "{}", target.pixels.len());
+    let problem = FitProblem {
+        scene: &scene,
+        camera,
+        projector: &projector,
+        instance: 0,
+        target: &target,
+        rendering: PixelRendering::SINGLE_PATH,
+    };
+    let fixed = FitConfig::default().fixed;
+    for at in [[0.5f32; FREE], [0.3, 0.7, 0.4, 0.2]] {
+        let (_, grad, _) = problem.loss_and_gradient(&fixed, at);
+        let g_max = grad.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+        assert!(g_max > 1e-3, "{grad:?}");
+        // h = 1e-3: the truncation error h²/6·L''' is ~1e-7 of L'; each pixel's f32 radiance
+        // carries ~6e-8 relative rounding, which over the loss difference / 2h gives an absolute
+        // error below ~1e-4·√L. 1 % of the largest component covers both with margin.
+        let h = 1e-3f32;
+        for i in 0..FREE {
+            let mut plus = at;
+            let mut minus = at;
+            plus[i] += h;
+            minus[i] -= h;
+            let fd = (problem.loss_and_gradient(&fixed, plus).0
+                - problem.loss_and_gradient(&fixed, minus).0)
+                / (2.0 * h as f64);
+            assert!(
+                (fd - grad[i]).abs() < 0.01 * g_max,
+                "∂L/∂{} at {at:?}: dual {} vs central difference {fd}",
+                FREE_NAMES[i],
+                grad[i]
+            );
+        }
+    }
+}
+
+/// Fits `truth` from 0.5 and returns the fit and the relative RMS radiance error.
+fn fit_of(truth: PrincipledParams<f32>) -> (FitResult, f64) {
+    let (scene, camera, projector) = sphere_setup();
+    let target = target_of(&scene, &camera, &projector, &truth);
+    let problem = FitProblem {
+        scene: &scene,
+        camera,
+        projector: &projector,
+        instance: 0,
+        target: &target,
+        rendering: PixelRendering::SINGLE_PATH,
+    };
+    let result = problem.fit(&FitConfig::default()).unwrap();
+    let rendered = problem.render(&result.params);
+    let (mut se, mut norm) = (0.0, 0.0);
+    for (r, t) in rendered.iter().zip(&target.radiance) {
+        se += ((r - t) as f64).powi(2);
+        norm += (*t as f64).powi(2);
+    }
+    (result, (se / norm).sqrt())
+}
+
+/// What the images determine: the diffuse albedo (1 − m)·base, the normal-incidence specular
+/// reflectance F0 = m·base + (1 − m)·0.08·specular, and the lobe width (roughness). With one
+/// grey channel and one light, base, metallic and specular separately are only weakly
+/// determined (through Fresnel at grazing angles and the retro-reflection term).
+fn diffuse_albedo(p: &PrincipledParams<f32>) -> f32 {
+    (1.0 - p.metallic) * p.base_color
+}
+fn f0(p: &PrincipledParams<f32>) -> f32 {
+    p.metallic * p.base_color + (1.0 - p.metallic) * 0.08 * p.specular
+}
+
+#[test]
+fn recovers_a_shiny_metal() {
+    // The mock camera's Gear material (metallic = 1: diffuse albedo 0, F0 = base_color).
+    let truth = PrincipledParams::new(0.78, 1.0, 0.16, 0.5).unwrap();
+    let (result, rel_rms) = fit_of(truth);
+    let p = result.params;
+    assert!(
+        result.loss.last().unwrap() < &(0.01 * result.loss[0]),
+        "{:?}",
+        result.loss
+    );
+    assert!(
+        rel_rms < 0.02,
+        "relative RMS radiance error {rel_rms}, {p:?}"
+    );
+    assert!(
+        (f0(&p) / f0(&truth) - 1.0).abs() < 0.03,
+        "F0 {}, {p:?}",
+        f0(&p)
+    );
+    assert!((p.roughness - 0.16).abs() < 0.02, "{p:?}");
+    // The L2 loss is dominated by the highlight: a diffuse albedo of 0.1 changes the radiance
+    // of this metal's darkest pixels but hardly its loss, so only "mostly metal" is asserted.
+    assert!(
+        diffuse_albedo(&p) < 0.1,
+        "diffuse albedo {}, {p:?}",
+        diffuse_albedo(&p)
+    );
+}
+
+#[test]
+fn recovers_a_dielectric_blend() {
+    let truth = PrincipledParams::new(0.6, 0.4, 0.5, 0.4).unwrap();
+    let (result, rel_rms) = fit_of(truth);
+    let p = result.params;
+    assert!(
+        rel_rms < 0.02,
+        "relative RMS radiance error {rel_rms}, {p:?}"
+    );
+    assert!(
+        (diffuse_albedo(&p) / diffuse_albedo(&truth) - 1.0).abs() < 0.05,
+        "{p:?}"
+    );
+    assert!((f0(&p) / f0(&truth) - 1.0).abs() < 0.1, "{p:?}");
+    assert!((p.roughness - 0.5).abs() < 0.05, "{p:?}");
+}
+
+#[test]
+fn bad_problems_are_rejected() {
+    let (scene, camera, projector) = sphere_setup();
+    let target = FitTarget {
+        pixels: vec![(0, 0), (1, 1)],
+        radiance: vec![1.0],
+    };
+    let problem = FitProblem {
+        scene: &scene,
+        camera,
+        projector: &projector,
+        instance: 0,
+        target: &target,
+        rendering: PixelRendering::SINGLE_PATH,
+    };
+    assert_eq!(
+        problem.fit(&FitConfig::default()).unwrap_err(),
+        FitError::LengthMismatch {
+            pixels: 2,
+            values: 1
+        }
+    );
+    // Corner pixels see nothing: no pixel enters the loss.
+    let empty = FitTarget {
+        pixels: vec![(0, 0)],
+        radiance: vec![1.0],
+    };
+    let problem = FitProblem {
+        target: &empty,
+        ..problem
+    };
+    assert!(matches!(
+        problem.fit(&FitConfig::default()),
+        Err(FitError::NoPixels { .. })
+    ));
+    let wrong = FitProblem {
+        instance: 3,
+        ..problem
+    };
+    assert!(matches!(
+        wrong.fit(&FitConfig::default()),
+        Err(FitError::NoSuchInstance { .. })
+    ));
+    let bad = FitConfig {
+        learning_rate: 0.0,
+        ..FitConfig::default()
+    };
+    assert!(matches!(problem.fit(&bad), Err(FitError::Config(_))));
+}
