@@ -258,6 +258,12 @@ fn capture_exposure_stack_writes_the_calibration_layout() {
             .sum::<f64>()
     };
     assert!(mean(2) > 2.0 * mean(0), "{} vs {}", mean(2), mean(0));
+    let gt = glint_render::exr_io::read_exr(
+        &scene_dir.join("glint/exposure_stack/000000/gt_left_radiance.exr"),
+    )
+    .unwrap();
+    assert_eq!(gt[0].0, "gt_left_radiance");
+    assert_eq!((gt[0].1.width(), gt[0].1.height()), (160, 128));
     let rig = read_rig_json(&scene_dir.join("glint/rig.json")).unwrap();
     assert_eq!(rig.stereo.intrinsics.width_px, 160);
     assert!((rig.stereo.baseline_m - 0.10118).abs() < 1e-9);
