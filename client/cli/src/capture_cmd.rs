@@ -529,6 +529,11 @@ fn run_exposure_stacks(
         let stack = camera.capture_exposure_stack(t_w_c, exposures_s, seed)?;
         let dir = bop.layout().exposure_stack_dir(k as u32);
         write_exposure_stack(&dir, &stack)?;
+        // Ground truth beside the stack, for evaluating a calibration only.
+        glint_render::exr_io::write_exr(
+            &dir.join("gt_left_radiance.exr"),
+            &[("gt_left_radiance", &stack.gt_left_radiance)],
+        )?;
         let seen = write_bop_annotations(&mut bop, k as u32, t_w_c, camera, poses, obj_id, None)?;
         let on_part: Vec<usize> = (0..stack.gt_left_radiance.data().len())
             .filter(|&i| seen.iter().any(|v| v.mask_visib.data()[i] != 0))
@@ -555,7 +560,7 @@ fn run_exposure_stacks(
     }
     bar.finish_and_clear();
     report += "\nFiles: `test/000001/glint/exposure_stack/XXXXXX/stack.json` with `dt_NNN.png` (the sensor's digital numbers), \
-               `glint/rig.json` (the rig as known hardware), `glint/gt_sensor.json` (ground truth, evaluation only), \
+               `gt_left_radiance.exr` beside it and `glint/gt_sensor.json` (ground truth, evaluation only), `glint/rig.json` (the rig as known hardware), \
                and the BOP files of each view (scene_camera, scene_gt, scene_gt_info, mask, mask_visib).\n";
     bop.finish()?;
     let path = args.out.join("report.md");

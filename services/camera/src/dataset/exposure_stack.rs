@@ -7,6 +7,9 @@
 //! - the images, gray PNGs of the sensor's digital numbers: 8-bit when `bit_depth` ≤ 8,
 //!   16-bit otherwise (values as read out, not rescaled).
 //!
+//! `glint capture --exposure-stack` also writes `gt_left_radiance.exr` there: the simulator's
+//! radiance, for evaluating a calibration only (the reader ignores it).
+//!
 //! The view's camera pose, object poses and masks are the BOP scene's usual files for the
 //! same `im_id`; the rig is `glint/rig.json` ([`super::rig_file`]).
 
