@@ -111,7 +111,10 @@ fn eval_refine_writes_auditable_results() {
         v[v.len() / 2]
     };
     let (mi, ms) = (median(&mut initial_t), median(&mut sdf_t));
-    assert!(ms < mi, "median translation error: sdf {ms} mm vs initial {mi} mm");
+    assert!(
+        ms < mi,
+        "median translation error: sdf {ms} mm vs initial {mi} mm"
+    );
     let n1 = rows[&("all".to_owned(), 1, "initial".to_owned())].0;
     let n2 = rows[&("all".to_owned(), 2, "initial".to_owned())].0;
     assert_eq!(count, n1 + n2);
