@@ -377,7 +377,7 @@ mod tests {
             Point3::new(0.001, -0.02, 0.3),
             Point3::new(0.5, 0.25, -0.125),
         ];
-        let normals = vec![nalgebra::Vector3::z(), nalgebra::Vector3::x()];
+        let normals = [nalgebra::Vector3::z(), nalgebra::Vector3::x()];
         for (name, n) in [("n.ply", Some(&normals[..])), ("p.ply", None)] {
             let path = dir.join(name);
             write_ply_points(&path, &points, n).unwrap();
