@@ -57,104 +57,12 @@ pub enum BenchCommand {
     /// Pose refinement: the SDF refiner vs ICP (point-to-point, point-to-plane) on noisy points
     /// with a known answer: time per refinement, residual evaluations per second (1 thread, all
     /// cores), final errors. `--export` writes the problems for the Open3D/small_gicp script.
-    Refine {
-        /// A part name or `all`.
-        #[arg(long, default_value = "all", value_parser = parse_parts)]
-        part: PartList,
-        /// Data points per problem (comma-separated), split evenly over the views.
-        #[arg(long, value_delimiter = ',', default_value = "2000,20000")]
-        points: Vec<usize>,
-        /// View counts (comma-separated).
-        #[arg(long, value_delimiter = ',', default_value = "1,4")]
-        views: Vec<usize>,
-        /// Thread counts (comma-separated); `all` is every core.
-        #[arg(long, value_delimiter = ',', default_value = "1,all", value_parser = parse_threads)]
-        threads: Vec<usize>,
-        /// Iteration budget of every method.
-        #[arg(long, default_value_t = 30)]
-        iterations: usize,
-        /// Timed runs per row; the table gives the median.
-        #[arg(long, default_value_t = 5)]
-        repeats: usize,
-        /// Surface samples of the ICP model (and of the exported model.ply).
-        #[arg(long, default_value_t = 50_000)]
-        model_samples: usize,
-        /// Depth noise σ_z along the view ray, mm.
-        #[arg(long, default_value_t = 0.3)]
-        sigma_z_mm: f64,
-        /// Translation of the initial pose from the truth, mm (random direction).
-        #[arg(long, default_value_t = 3.0)]
-        initial_mm: f64,
-        /// Rotation of the initial pose from the truth, degrees (random axis).
-        #[arg(long, default_value_t = 3.0)]
-        initial_deg: f64,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Also write the table as CSV here.
-        #[arg(long)]
-        csv: Option<PathBuf>,
-        /// Write every problem (PLY point clouds, poses, Glint's results) under this directory.
-        #[arg(long)]
-        export: Option<PathBuf>,
-    },
-}
-
-/// Parts named on the command line.
-#[derive(Clone, Debug)]
-pub struct PartList(Vec<Part>);
-
-fn parse_parts(s: &str) -> Result<PartList, String> {
-    if s == "all" {
-        Ok(PartList(Part::ALL.to_vec()))
-    } else {
-        crate::mesh_cmd::parse_part(s).map(|p| PartList(vec![p]))
-    }
-}
-
-/// A thread count, `all` → 0 (every core).
-fn parse_threads(s: &str) -> Result<usize, String> {
-    match s {
-        "all" => Ok(0),
-        _ => match s.parse::<usize>() {
-            Ok(n) if n >= 1 => Ok(n),
-            _ => Err(format!(
-                "`{s}` is not a thread count (a positive integer or `all`)"
-            )),
-        },
-    }
+    Refine(refine::RefineBenchArgs),
 }
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
     match cmd {
-        BenchCommand::Refine {
-            part,
-            points,
-            views,
-            threads,
-            iterations,
-            repeats,
-            model_samples,
-            sigma_z_mm,
-            initial_mm,
-            initial_deg,
-            seed,
-            csv,
-            export,
-        } => refine::run(&refine::RefineBenchArgs {
-            parts: part.0,
-            points,
-            views,
-            threads,
-            iterations,
-            repeats,
-            model_samples,
-            sigma_z_mm,
-            initial_mm,
-            initial_deg,
-            seed,
-            csv,
-            export,
-        }),
+        BenchCommand::Refine(args) => refine::run(&args),
         BenchCommand::Sdf {
             voxel_mm,
             padding_mm,

@@ -191,16 +191,18 @@ def main():
                   f"{1e3 * seconds:.3f} | {t_mm:.3f} / {r_deg:.3f} | {ratio:.3f} | "
                   f"{sdf['t_err_mm']:.3f} / {sdf['r_err_deg']:.3f} |")
             if method == "open3d-p2p":
-                summary.append((problem, sdf, seconds, t_mm, r_deg))
+                summary.append((problem, sdf, seconds, t_mm, r_deg, kd_s))
         print(f"{head} | (open3d k-d tree build of the model alone) | {ARGS.threads} | | "
               f"{1e3 * kd_s:.3f} | | | |")
     print("\nGoal: Glint SDF ≥ 10× faster than Open3D point-to-point ICP at equal or better accuracy")
-    for problem, sdf, o3d_s, t_mm, r_deg in summary:
+    for problem, sdf, o3d_s, t_mm, r_deg, kd_s in summary:
         speedup = o3d_s / sdf["time_s_median"]
+        # Open3D rebuilds the model's k-d tree in every call; Glint builds its model once.
+        speedup_no_tree = max(o3d_s - kd_s, 0.0) / sdf["time_s_median"]
         accurate = sdf["t_err_mm"] <= t_mm and sdf["r_err_deg"] <= r_deg
         holds = speedup >= 10.0 and accurate
         print(f"- {problem['part']} {problem['points']} points {problem['views']} views: "
-              f"speed-up {speedup:.1f}×, Glint {sdf['t_err_mm']:.3f} mm / {sdf['r_err_deg']:.3f}° vs "
+              f"speed-up {speedup:.1f}× ({speedup_no_tree:.1f}× without Open3D's k-d tree build), Glint {sdf['t_err_mm']:.3f} mm / {sdf['r_err_deg']:.3f}° vs "
               f"Open3D {t_mm:.3f} mm / {r_deg:.3f}° → {'holds' if holds else 'does not hold'}"
               f"{'' if accurate else ' (accuracy)'}{'' if speedup >= 10 else ' (speed)'}")
 

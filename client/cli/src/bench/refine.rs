@@ -26,21 +26,71 @@ use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 
 /// What `glint bench refine` was asked for.
+#[derive(clap::Args)]
 pub struct RefineBenchArgs {
-    pub parts: Vec<Part>,
+    /// A part name or `all`.
+    #[arg(long = "part", default_value = "all", value_parser = parse_parts)]
+    pub parts: PartList,
+    /// Data points per problem (comma-separated), split evenly over the views.
+    #[arg(long, value_delimiter = ',', default_value = "2000,20000")]
     pub points: Vec<usize>,
+    /// View counts (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "1,4")]
     pub views: Vec<usize>,
-    /// Thread counts; 0 means all cores.
+    /// Thread counts (comma-separated); `all` is every core.
+    #[arg(long, value_delimiter = ',', default_value = "1,all", value_parser = parse_threads)]
     pub threads: Vec<usize>,
+    /// Iteration budget of every method.
+    #[arg(long, default_value_t = 30)]
     pub iterations: usize,
+    /// Timed runs per row; the table gives the median.
+    #[arg(long, default_value_t = 5)]
     pub repeats: usize,
+    /// Surface samples of the ICP model (and of the exported model.ply).
+    #[arg(long, default_value_t = 50_000)]
     pub model_samples: usize,
+    /// Depth noise σ_z along the view ray, mm.
+    #[arg(long, default_value_t = 0.3)]
     pub sigma_z_mm: f64,
+    /// Translation of the initial pose from the truth, mm (random direction).
+    #[arg(long, default_value_t = 3.0)]
     pub initial_mm: f64,
+    /// Rotation of the initial pose from the truth, degrees (random axis).
+    #[arg(long, default_value_t = 3.0)]
     pub initial_deg: f64,
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Also write the table as CSV here.
+    #[arg(long)]
     pub csv: Option<PathBuf>,
+    /// Write every problem (PLY point clouds, poses, Glint's results) under this directory.
+    #[arg(long)]
     pub export: Option<PathBuf>,
+}
+
+/// Parts named on the command line.
+#[derive(Clone, Debug)]
+pub struct PartList(pub Vec<Part>);
+
+fn parse_parts(s: &str) -> Result<PartList, String> {
+    if s == "all" {
+        Ok(PartList(Part::ALL.to_vec()))
+    } else {
+        crate::mesh_cmd::parse_part(s).map(|p| PartList(vec![p]))
+    }
+}
+
+/// A thread count, `all` → 0 (every core).
+fn parse_threads(s: &str) -> Result<usize, String> {
+    match s {
+        "all" => Ok(0),
+        _ => match s.parse::<usize>() {
+            Ok(n) if n >= 1 => Ok(n),
+            _ => Err(format!(
+                "`{s}` is not a thread count (a positive integer or `all`)"
+            )),
+        },
+    }
 }
 
 /// Distance of the views' eyes from the object, metres.
@@ -87,7 +137,7 @@ impl Row {
 }
 
 pub fn run(args: &RefineBenchArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(!args.parts.is_empty(), "--part: no part given");
+    anyhow::ensure!(!args.parts.0.is_empty(), "--part: no part given");
     anyhow::ensure!(
         args.points.iter().all(|&n| n >= 12),
         "--points: every count must be at least 12 (two per pose degree of freedom)"
@@ -128,10 +178,10 @@ pub fn run(args: &RefineBenchArgs) -> anyhow::Result<()> {
         max_iterations: args.iterations,
         ..IcpConfig::with_method(method)
     });
-    let problems = args.parts.len() * args.points.len() * args.views.len();
+    let problems = args.parts.0.len() * args.points.len() * args.views.len();
     let bar = crate::progress::bar(problems as u64, "bench refine");
     let mut rows = Vec::new();
-    for (part_index, &part) in args.parts.iter().enumerate() {
+    for (part_index, &part) in args.parts.0.iter().enumerate() {
         bar.set_message(part.name());
         let mesh = part.mesh();
         let sdf = SdfGrid::build(&mesh, &SdfConfig::default())
@@ -448,13 +498,9 @@ fn write_csv(path: &Path, rows: &[Row], repeats: usize) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A 4×4 homogeneous matrix, row-major.
-fn row_major(t: &Isometry3<f64>) -> Vec<f64> {
-    let m = t.to_homogeneous();
-    (0..4)
-        .flat_map(|i| (0..4).map(move |j| (i, j)))
-        .map(|(i, j)| m[(i, j)])
-        .collect()
+/// A matrix's entries, row-major (nalgebra stores column-major).
+fn row_major<const R: usize, const C: usize>(m: &nalgebra::SMatrix<f64, R, C>) -> Vec<f64> {
+    m.transpose().as_slice().to_vec()
 }
 
 /// Writes `DIR/<part>_p<points>_v<views>/`: `model.ply` (the ICP model's samples with normals,
@@ -489,21 +535,15 @@ fn export_problem(
     let discrete: Vec<Vec<f64>> = symmetry
         .discrete_rotations()
         .iter()
-        .map(|q| {
-            let m = q.to_rotation_matrix();
-            (0..3)
-                .flat_map(|i| (0..3).map(move |j| (i, j)))
-                .map(|(i, j)| m[(i, j)])
-                .collect()
-        })
+        .map(|q| row_major(q.to_rotation_matrix().matrix()))
         .collect();
     let problem_json = serde_json::json!({
         "part": problem.part.name(),
         "points": problem.points.len(),
         "views": problem.views,
         "frames": "t_o_w maps world (points.ply) to object (model.ply); 4x4 row-major; metres",
-        "t_o_w_init": row_major(&problem.t_o_w_init),
-        "t_o_w_gt": row_major(&problem.t_o_w_gt),
+        "t_o_w_init": row_major(&problem.t_o_w_init.to_homogeneous()),
+        "t_o_w_gt": row_major(&problem.t_o_w_gt.to_homogeneous()),
         "iterations": args.iterations,
         "max_correspondence_distance_m": icp.max_correspondence_distance_m,
         "sigma_z_m": args.sigma_z_mm * 1e-3,
