@@ -11,6 +11,8 @@ use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use nalgebra::Point3;
 use rayon::prelude::*;
 
+mod refine;
+
 #[derive(Subcommand)]
 pub enum BenchCommand {
     /// SDF grids of the five parts: size, build time, samples with gradient per second.
@@ -52,10 +54,15 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 1)]
         export_seed: u64,
     },
+    /// Pose refinement: the SDF refiner vs ICP (point-to-point, point-to-plane) on noisy points
+    /// with a known answer: time per refinement, residual evaluations per second (1 thread, all
+    /// cores), final errors. `--export` writes the problems for the Open3D/small_gicp script.
+    Refine(refine::RefineBenchArgs),
 }
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
     match cmd {
+        BenchCommand::Refine(args) => refine::run(&args),
         BenchCommand::Sdf {
             voxel_mm,
             padding_mm,

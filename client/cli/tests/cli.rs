@@ -371,3 +371,84 @@ fn render_bench_exports_a_scene_for_mitsuba() {
         assert!(*m >= s * (1.0 - 1e-5), "multi-path {m} < single-path {s}");
     }
 }
+
+#[test]
+fn refine_bench_prints_its_table_writes_csv_and_exports_problems() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("refine.csv");
+    let export = dir.path().join("export");
+    let o = glint(&[
+        "bench",
+        "refine",
+        "--part",
+        "gear",
+        "--points",
+        "300",
+        "--views",
+        "1,2",
+        "--threads",
+        "1",
+        "--iterations",
+        "15",
+        "--repeats",
+        "1",
+        "--model-samples",
+        "3000",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--export",
+        export.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    // Header, separator and one row per view count and method.
+    let table: Vec<&str> = stdout.lines().filter(|l| l.starts_with("| ")).collect();
+    assert_eq!(table.len(), 1 + 2 * 3, "{stdout}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 6);
+    let mut methods: Vec<&str> = rows.iter().map(|r| r[col("method")]).collect();
+    methods.sort();
+    assert_eq!(
+        methods,
+        [
+            "icp-p2p",
+            "icp-p2p",
+            "icp-p2plane",
+            "icp-p2plane",
+            "sdf",
+            "sdf"
+        ]
+    );
+    for r in &rows {
+        assert_eq!(r.len(), header.len());
+        let num = |name: &str| r[col(name)].parse::<f64>().unwrap();
+        assert_eq!(num("points"), 300.0);
+        // The initial pose is 3 mm / 3° off by construction; every method must get closer.
+        assert!((num("initial_t_mm") - 3.0).abs() < 1e-6);
+        assert!(num("t_err_mm") < num("initial_t_mm"), "{r:?}");
+        assert!(num("r_err_deg") < num("initial_r_deg"), "{r:?}");
+        assert!(num("time_ms_median") > 0.0 && num("point_evals_per_s") > 0.0);
+        assert!(num("point_passes") >= num("iterations"));
+    }
+    for views in [1, 2] {
+        let sub = export.join(format!("gear_p300_v{views}"));
+        let unit = glint_geometry::mesh::LengthUnit::Metre;
+        let data = glint_geometry::io::read_ply_points(&sub.join("points.ply"), unit).unwrap();
+        assert_eq!(data.len(), 300);
+        let model = glint_geometry::io::read_ply_points(&sub.join("model.ply"), unit).unwrap();
+        assert_eq!(model.len(), 3000);
+        let problem: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(sub.join("problem.json")).unwrap())
+                .unwrap();
+        assert_eq!(problem["t_o_w_init"].as_array().unwrap().len(), 16);
+        assert_eq!(problem["t_o_w_gt"].as_array().unwrap().len(), 16);
+        let glint: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(sub.join("glint.json")).unwrap())
+                .unwrap();
+        assert_eq!(glint["runs"].as_array().unwrap().len(), 3);
+    }
+}

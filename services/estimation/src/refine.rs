@@ -104,6 +104,10 @@ pub struct RefineResult {
     /// `information⁻¹` (eq 18), or `None` when the information is rank-deficient — a part
     /// with a continuous symmetry, or too few constraints: some direction is unobservable.
     pub covariance: Option<Matrix6<f64>>,
+    /// Passes over all points (residual, Jacobian and weight of every point at one pose): the
+    /// initial one, one per gate stage, one per Levenberg–Marquardt trial step. The work of a
+    /// refinement is `points × point_passes` residual evaluations.
+    pub point_passes: usize,
 }
 
 /// Why a refinement could not run.
@@ -300,6 +304,7 @@ pub fn refine_sdf(
         gates.push((g * 0.5).max(config.final_gate_m));
     }
     let mut normal = accumulate(sdf, points, &t_o_w, config, gates[0]);
+    let mut point_passes = 1;
     if normal.gated < config.min_inliers {
         return Err(RefineError::TooFewInliers {
             inliers: normal.gated,
@@ -313,6 +318,7 @@ pub fn refine_sdf(
     'stages: for (stage, &gate) in gates.iter().enumerate() {
         if stage > 0 {
             normal = accumulate(sdf, points, &t_o_w, config, gate);
+            point_passes += 1;
             if normal.gated < config.min_inliers {
                 break; // the tighter gate leaves too little: keep the previous stage's pose
             }
@@ -339,6 +345,7 @@ pub fn refine_sdf(
                 };
                 let candidate = se3::perturb_left(&step, &t_o_w);
                 let trial = accumulate(sdf, points, &candidate, config, gate);
+                point_passes += 1;
                 if trial.gated >= config.min_inliers && trial.cost <= normal.cost {
                     accepted = Some((step, candidate, trial));
                     break;
@@ -383,6 +390,7 @@ pub fn refine_sdf(
         },
         information: normal.information,
         covariance: covariance_from_information(&normal.information),
+        point_passes,
     })
 }
 

@@ -23,7 +23,9 @@ use std::fmt;
 use std::path::Path;
 
 pub use atomic::{AtomicWriteError, write_atomically, write_file_atomically};
-pub use ply::{PlyEncoding, write_ply_to};
+pub use ply::{PlyEncoding, write_ply_points_to, write_ply_to};
+
+use nalgebra::Point3;
 
 use crate::mesh::{LengthUnit, MeshError, MeshReport, TriMesh};
 
@@ -252,6 +254,54 @@ pub fn write_ply_to_vec(mesh: &TriMesh, unit: LengthUnit, encoding: PlyEncoding)
     bytes
 }
 
+/// Reads the vertices of a PLY point cloud written in `unit`, in metres: a file with a
+/// `vertex` element and no faces (other vertex properties, such as normals, are skipped). Errors
+/// name the file; a cloud without points or with a non-finite point is
+/// [`MeshIoError::InvalidMesh`].
+pub fn read_ply_points(path: &Path, unit: LengthUnit) -> Result<Vec<Point3<f32>>, MeshIoError> {
+    let file = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|source| MeshIoError::Read {
+        file: file.clone(),
+        source,
+    })?;
+    let parsed = ply::read(&bytes, unit.metres_per_unit(), &file)?;
+    let vertices = parsed.mesh.vertices;
+    let invalid = |source: MeshError| MeshIoError::InvalidMesh {
+        file: file.clone(),
+        source,
+    };
+    if vertices.is_empty() {
+        return Err(invalid(MeshError::Empty {
+            vertices: 0,
+            triangles: parsed.mesh.triangles.len(),
+        }));
+    }
+    if let Some((index, p)) = vertices
+        .iter()
+        .enumerate()
+        .find(|(_, p)| !p.coords.iter().all(|c| c.is_finite()))
+    {
+        return Err(invalid(MeshError::NonFiniteVertex {
+            index,
+            x: p.x,
+            y: p.y,
+            z: p.z,
+        }));
+    }
+    Ok(vertices)
+}
+
+/// Writes a point cloud (metres) as binary little-endian PLY in metres, with `nx ny nz` when
+/// `normals` is given (one per point), atomically.
+pub fn write_ply_points(
+    path: &Path,
+    points: &[Point3<f64>],
+    normals: Option<&[nalgebra::Vector3<f64>]>,
+) -> Result<(), MeshIoError> {
+    write_atomically(path, |w| write_ply_points_to(w, points, normals))?;
+    Ok(())
+}
+
 /// What a format's parser hands on: vertices already in metres, every index in range.
 struct ParsedMesh {
     mesh: TriMesh,
@@ -318,6 +368,34 @@ mod tests {
     };
     use super::*;
     use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn point_clouds_round_trip_with_and_without_normals() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
+        let points = vec![
+            Point3::new(0.001, -0.02, 0.3),
+            Point3::new(0.5, 0.25, -0.125),
+        ];
+        let normals = [nalgebra::Vector3::z(), nalgebra::Vector3::x()];
+        for (name, n) in [("n.ply", Some(&normals[..])), ("p.ply", None)] {
+            let path = dir.join(name);
+            write_ply_points(&path, &points, n).unwrap();
+            let read = read_ply_points(&path, LengthUnit::Metre).unwrap();
+            assert_eq!(read.len(), 2);
+            for (a, b) in read.iter().zip(&points) {
+                // f32 storage: relative rounding 2⁻²⁴.
+                assert!((a.cast::<f64>() - b).norm() < 1e-7, "{a} vs {b}");
+            }
+        }
+        assert!(write_ply_points(&dir.join("bad.ply"), &points, Some(&normals[..1])).is_err());
+        assert!(!dir.join("bad.ply").exists());
+        write_ply_points(&dir.join("empty.ply"), &[], None).unwrap();
+        assert!(matches!(
+            read_ply_points(&dir.join("empty.ply"), LengthUnit::Metre),
+            Err(MeshIoError::InvalidMesh { .. })
+        ));
+    }
 
     #[test]
     fn formats_come_from_extensions_in_any_case() {

@@ -78,6 +78,51 @@ pub fn write_ply_to(
     Ok(())
 }
 
+/// Writes a point cloud (metres) as binary little-endian PLY in metres: `float x, y, z` and,
+/// with `normals`, `float nx, ny, nz`; no faces. Panics-free: a `normals` slice of another
+/// length is an `InvalidInput` error. Give it a buffered writer.
+pub fn write_ply_points_to(
+    out: &mut dyn Write,
+    points: &[Point3<f64>],
+    normals: Option<&[nalgebra::Vector3<f64>]>,
+) -> io::Result<()> {
+    if let Some(n) = normals
+        && n.len() != points.len()
+    {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("{} normals for {} points", n.len(), points.len()),
+        ));
+    }
+    let normal_header = if normals.is_some() {
+        "property float nx\nproperty float ny\nproperty float nz\n"
+    } else {
+        ""
+    };
+    write!(
+        out,
+        "ply\nformat binary_little_endian 1.0\ncomment written by Glint; lengths in m\n\
+         element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
+         {normal_header}end_header\n",
+        points.len()
+    )?;
+    for (i, p) in points.iter().enumerate() {
+        let mut record = [0u8; 24];
+        let mut values = [p.x, p.y, p.z, 0.0, 0.0, 0.0];
+        let len = if let Some(n) = normals {
+            values[3..].copy_from_slice(n[i].as_slice());
+            24
+        } else {
+            12
+        };
+        for (bytes, c) in record[..len].chunks_exact_mut(4).zip(values) {
+            bytes.copy_from_slice(&(c as f32).to_le_bytes());
+        }
+        out.write_all(&record[..len])?;
+    }
+    Ok(())
+}
+
 /// Whether `bytes` start with PLY's magic line.
 pub(super) fn looks_like_ply(bytes: &[u8]) -> bool {
     bytes.starts_with(b"ply") && matches!(bytes.get(3), Some(b'\n' | b'\r'))
