@@ -398,6 +398,7 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
     for (d, (hits, n)) in args.icp_distances_mm.iter().zip(&per_distance) {
         tuning.push((*d, *hits, *n));
     }
+    // Ties go to the later (larger) distance: `max_by` keeps the last maximum.
     let best = tuning
         .iter()
         .max_by(|a, b| {

@@ -125,14 +125,13 @@ fn generate(
         let capture = camera.capture(t_w_c, capture_seed)?;
         crate::capture_cmd::write_bop_image(&mut bop, k as u32, &capture, &camera, &poses, OBJ_ID)?;
         if k == 0 {
-            // Two more read-outs of this view's pattern radiance: what a user does to measure
-            // the sensor noise (two shots of a static scene).
-            let [left, _] = camera.render_pair(t_w_c, camera.pattern(), capture_seed);
+            // Two more read-outs of this view's left pattern radiance: what a user does to
+            // measure the sensor noise (two shots of a static scene).
             for (shot, s) in [('a', 11u64), ('b', 12u64)] {
                 let dn = camera
                     .config
                     .sensor
-                    .read_out(&left.radiance, capture_seed ^ s);
+                    .read_out(&capture.gt_left_radiance, capture_seed ^ s);
                 crate::capture_cmd::write_gray(
                     &noise_shot_path(&glint_dir, shot),
                     &dn,
