@@ -140,6 +140,7 @@ fn eval_refine_rejects_bad_arguments_before_writing() {
         ("--views", "1,9", "--views"),
         ("--icp-distances-mm", "0,-1", "--icp-distances-mm"),
         ("--parts", "gear,spanner", "spanner"),
+        ("--window-radius-px", "0", "--window-radius-px"),
     ] {
         let mut args = vec!["eval", "refine", "--views-per-scene", "4", "--out"];
         args.push(out.to_str().unwrap());

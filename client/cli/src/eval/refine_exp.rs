@@ -21,7 +21,8 @@ use rand::seq::IndexedRandom;
 
 use super::metrics::{InitialPoseNoise, chi2_mean_band, nees};
 use super::scenes::{
-    EvalObject, LoadedScene, OBJ_ID, SceneSpec, SigmaSource, ensure_scene, load_scene,
+    EvalObject, LoadedScene, OBJ_ID, SceneSpec, SigmaSource, capture_config, ensure_scene,
+    load_scene,
 };
 
 #[derive(clap::Args)]
@@ -69,6 +70,9 @@ pub struct RefineArgs {
     /// ground-truth metal (scenes are cached separately).
     #[arg(long)]
     pub matte: bool,
+    /// The mock camera's matching window radius, px (default: the camera's, 5 = 11×11).
+    #[arg(long)]
+    pub window_radius_px: Option<u32>,
     /// Mask erosion before refinement, px: only pixels whose window of this radius lies inside
     /// the object's mask give points (both refiners). Default: the matcher's window radius, so
     /// no point's depth was matched across a silhouette.
@@ -308,25 +312,30 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
         anyhow::bail!("--icp-distances-mm: give positive distances, e.g. 2,5,10,20");
     }
     let objects = objects(args)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
     let rig =
         glint_render::rig::SliRig::ensenso_n35().resized(args.resolution.0, args.resolution.1)?;
-    let spec = SceneSpec {
-        matcher: format!(
-            "{:?}",
-            glint_camera::capture::CaptureConfig::for_rig(&rig)?.matcher
-        ),
+    let window_radius_px = args
+        .window_radius_px
+        .unwrap_or(glint_render::stereo::StereoMatcherConfig::default().window_radius_px);
+    let mut spec = SceneSpec {
+        matcher: String::new(),
+        window_radius_px,
         instances: args.instances,
         views: args.views_per_scene,
         width_px: args.resolution.0,
         height_px: args.resolution.1,
         spp: args.spp,
     };
+    spec.matcher = format!(
+        "{:?}",
+        capture_config(&rig, &spec)
+            .context("--window-radius-px")?
+            .matcher
+    );
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
     let noise = InitialPoseNoise::default();
-    let erode_px = args
-        .erode_px
-        .unwrap_or(glint_render::stereo::StereoMatcherConfig::default().window_radius_px);
+    let erode_px = args.erode_px.unwrap_or(window_radius_px);
     let scene_root = args
         .out
         .join(if args.matte { "scenes_matte" } else { "scenes" });
@@ -370,7 +379,13 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
             .iter()
             .position(|o| o.name == object.name)
             .expect("listed");
-        let scene = load_scene(dir, OBJ_ID, SigmaSource::PatternImages, erode_px)?;
+        let scene = load_scene(
+            dir,
+            OBJ_ID,
+            SigmaSource::PatternImages,
+            window_radius_px,
+            erode_px,
+        )?;
         let trials = trials_of_scene(object, *seed, &scene, &args.views, &noise, args.seed);
         for (d, acc) in args.icp_distances_mm.iter().zip(per_distance.iter_mut()) {
             let config = IcpConfig {
@@ -426,7 +441,13 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
         for s in 0..args.scenes {
             let seed = eval_seed(s);
             let dir = ensure_scene(&scene_root, object, seed, &spec)?;
-            let scene = load_scene(&dir, OBJ_ID, SigmaSource::PatternImages, erode_px)?;
+            let scene = load_scene(
+                &dir,
+                OBJ_ID,
+                SigmaSource::PatternImages,
+                window_radius_px,
+                erode_px,
+            )?;
             for trial in trials_of_scene(object, seed, &scene, &args.views, &noise, args.seed) {
                 let outcomes = run_trial(
                     &trial,

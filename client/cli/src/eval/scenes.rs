@@ -18,7 +18,6 @@ use glint_geometry::io::write_file_atomically;
 use glint_geometry::{Symmetry, TriMesh};
 use glint_render::bsdf::PrincipledParams;
 use glint_render::rig::SliRig;
-use glint_render::stereo::StereoMatcherConfig;
 use nalgebra::Isometry3;
 
 /// The object of an experiment: a mesh (metres, its own frame), its symmetry, and the
@@ -37,6 +36,8 @@ pub struct SceneSpec {
     /// The mock camera's matcher settings (Debug form): scenes matched differently are not
     /// reused.
     pub matcher: String,
+    /// The matching window's radius, px (the rest of the matcher is the camera's default).
+    pub window_radius_px: u32,
     pub instances: u32,
     pub views: u32,
     pub width_px: u32,
@@ -84,6 +85,23 @@ pub fn ensure_scene(
     Ok(scene_dir)
 }
 
+/// The mock camera's settings for `spec`.
+pub fn capture_config(rig: &SliRig, spec: &SceneSpec) -> anyhow::Result<CaptureConfig> {
+    let mut config = CaptureConfig {
+        samples_per_pixel: spec.spp,
+        ..CaptureConfig::for_rig(rig)?
+    };
+    let r = spec.window_radius_px;
+    config.matcher.window_radius_px = r;
+    // The edge pass re-matches with a smaller window; keep it smaller than the main one.
+    config.matcher.edge_windows = config.matcher.edge_windows.filter(|_| r > 1).map(|mut e| {
+        e.window_radius_px = e.window_radius_px.min(r - 1);
+        e
+    });
+    config.matcher.validate()?;
+    Ok(config)
+}
+
 fn generate(
     dataset: &Path,
     scene_dir: &Path,
@@ -98,10 +116,7 @@ fn generate(
     let camera = MockSliCamera {
         rig,
         scene: &scene,
-        config: CaptureConfig {
-            samples_per_pixel: spec.spp,
-            ..CaptureConfig::for_rig(&rig)?
-        },
+        config: capture_config(&rig, spec)?,
     };
     let view_poses = views::spherical_cap(
         spec.views as usize,
@@ -198,12 +213,14 @@ fn pattern_as_normalised(image: PatternImage) -> (Image<f32>, u16) {
 /// world points with σ_z (eq 1–7). Instances are identified across views by their world pose
 /// (the scene is static), so multi-view trials can stack one instance's points.
 ///
+/// `window_radius_px`: the matcher's window, over which eq 1–5 sums image gradients.
 /// `erode_px`: only mask pixels whose `(2·erode_px + 1)²` window lies inside the mask give
 /// points (see [`interior_mask`]); 0 keeps the whole mask.
 pub fn load_scene(
     scene_dir: &Path,
     obj_id: u32,
     sigma: SigmaSource,
+    window_radius: u32,
     erode_px: u32,
 ) -> anyhow::Result<LoadedScene> {
     let reader = BopSceneReader::open(scene_dir)?;
@@ -236,7 +253,6 @@ pub fn load_scene(
             (model, rig)
         }
     };
-    let window_radius = StereoMatcherConfig::default().window_radius_px;
     let mut views = Vec::new();
     let mut instances_t_w_o: Vec<Isometry3<f64>> = Vec::new();
     for im_id in reader.image_ids() {
