@@ -44,7 +44,7 @@ fn eval_refine_writes_auditable_results() {
         "eval",
         "refine",
         "--parts",
-        "gear",
+        "eye-bolt",
         "--scenes",
         "1",
         "--views-per-scene",
@@ -66,7 +66,7 @@ fn eval_refine_writes_auditable_results() {
     assert!(o.status.success(), "{}", text(&o));
     let rows = results(&std::fs::read_to_string(out.join("results.csv")).unwrap());
     // Every group × view count × method is there, with the same trials for each method.
-    for group in ["gear", "all"] {
+    for group in ["eye-bolt", "all"] {
         for k in [1, 2] {
             let n: Vec<usize> = ["initial", "sdf", "icp"]
                 .iter()

@@ -70,9 +70,13 @@ pub struct RefineArgs {
     /// ground-truth metal (scenes are cached separately).
     #[arg(long)]
     pub matte: bool,
-    /// The mock camera's matching window radius, px (default: the camera's, 5 = 11×11).
-    #[arg(long)]
-    pub window_radius_px: Option<u32>,
+    /// The mock camera's matching window radius, px. Default 3 (7×7, edge pass 5×5), not the
+    /// camera's general-purpose 5 (11×11): an 11×11 window spans ~5 mm at 0.5 m, the size of
+    /// these parts' features, and its depth bias pulls the refined orientation. Measured on
+    /// eye-bolt, gear, zigzag (2 scenes each): SDF 2 mm/2° at 4 views 18.9 % with r = 3
+    /// against 4.5 % with r = 5.
+    #[arg(long, default_value_t = 3)]
+    pub window_radius_px: u32,
     /// Mask erosion before refinement, px: only pixels whose window of this radius lies inside
     /// the object's mask give points (both refiners). Default: the matcher's window radius, so
     /// no point's depth was matched across a silhouette.
@@ -314,9 +318,7 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
     let objects = objects(args)?;
     let rig =
         glint_render::rig::SliRig::ensenso_n35().resized(args.resolution.0, args.resolution.1)?;
-    let window_radius_px = args
-        .window_radius_px
-        .unwrap_or(glint_render::stereo::StereoMatcherConfig::default().window_radius_px);
+    let window_radius_px = args.window_radius_px;
     let mut spec = SceneSpec {
         matcher: String::new(),
         window_radius_px,
