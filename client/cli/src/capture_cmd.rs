@@ -102,9 +102,10 @@ pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     }
 }
 
-/// Working distance of the views, metres, and the cap's half-angle, degrees.
-const VIEW_DISTANCE_M: f64 = 0.5;
-const VIEW_CAP_DEG: f64 = 35.0;
+/// Working distance of the views, metres, and the cap's half-angle, degrees (like ROBI's
+/// robot-arm views); every command that captures a bin uses these.
+pub(crate) const VIEW_DISTANCE_M: f64 = 0.5;
+pub(crate) const VIEW_CAP_DEG: f64 = 35.0;
 
 pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)

@@ -45,9 +45,6 @@ pub struct SceneSpec {
     pub spp: u32,
 }
 
-/// Working distance of the views, metres, and the cap's half-angle, degrees (like ROBI's).
-const VIEW_DISTANCE_M: f64 = 0.5;
-const VIEW_CAP_DEG: f64 = 35.0;
 pub const OBJ_ID: u32 = 1;
 /// The BOP scene holding one bin.
 const SCENE: &str = "000001";
@@ -120,8 +117,8 @@ fn generate(
     };
     let view_poses = views::spherical_cap(
         spec.views as usize,
-        VIEW_DISTANCE_M,
-        VIEW_CAP_DEG,
+        crate::capture_cmd::VIEW_DISTANCE_M,
+        crate::capture_cmd::VIEW_CAP_DEG,
         bin.centre(),
         rig.stereo.baseline_m,
     );

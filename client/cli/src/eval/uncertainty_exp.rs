@@ -85,7 +85,13 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
             ..CaptureConfig::for_rig(&rig)?
         },
     };
-    let t_w_c = views::spherical_cap(1, 0.5, 35.0, bin.centre(), rig.stereo.baseline_m)[0];
+    let t_w_c = views::spherical_cap(
+        1,
+        crate::capture_cmd::VIEW_DISTANCE_M,
+        crate::capture_cmd::VIEW_CAP_DEG,
+        bin.centre(),
+        rig.stereo.baseline_m,
+    )[0];
     let renders = camera.render_pair(&t_w_c, camera.pattern(), args.seed);
     let sensor = &camera.config.sensor;
     let max_dn = sensor.max_dn();
