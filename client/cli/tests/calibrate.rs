@@ -1,21 +1,8 @@
 //! `glint calibrate response` on an exposure stack the mock camera took, end to end.
 
-use std::process::{Command, Output};
+mod common;
 
-fn glint(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_glint"))
-        .args(args)
-        .output()
-        .expect("the glint binary runs")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
+use common::{glint, printed as text};
 
 #[test]
 fn response_from_a_captured_stack_matches_the_hidden_curve() {

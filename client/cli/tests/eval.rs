@@ -1,17 +1,8 @@
 //! `glint eval …` end to end on small scenes: the files a user audits, and clear errors.
 
-use std::process::{Command, Output};
+mod common;
 
-fn glint(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_glint"))
-        .args(args)
-        .output()
-        .expect("the glint binary runs")
-}
-
-fn text(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{glint, printed as text};
 
 /// `part,views,method` → (n, rate 5/5, rate 2/2).
 fn results(csv: &str) -> std::collections::HashMap<(String, u32, String), (usize, f64, f64)> {
