@@ -21,8 +21,7 @@ use rand::seq::IndexedRandom;
 
 use super::metrics::{InitialPoseNoise, chi2_mean_band, nees};
 use super::scenes::{
-    EvalObject, LoadedScene, OBJ_ID, SceneSpec, SigmaSource, capture_config, ensure_scene,
-    load_scene,
+    EvalObject, LoadedScene, OBJ_ID, SceneSpec, capture_config, ensure_scene, load_scene,
 };
 
 #[derive(clap::Args)]
@@ -381,13 +380,7 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
             .iter()
             .position(|o| o.name == object.name)
             .expect("listed");
-        let scene = load_scene(
-            dir,
-            OBJ_ID,
-            SigmaSource::PatternImages,
-            window_radius_px,
-            erode_px,
-        )?;
+        let scene = load_scene(dir, OBJ_ID, window_radius_px, erode_px)?;
         let trials = trials_of_scene(object, *seed, &scene, &args.views, &noise, args.seed);
         for (d, acc) in args.icp_distances_mm.iter().zip(per_distance.iter_mut()) {
             let config = IcpConfig {
@@ -443,13 +436,7 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
         for s in 0..args.scenes {
             let seed = eval_seed(s);
             let dir = ensure_scene(&scene_root, object, seed, &spec)?;
-            let scene = load_scene(
-                &dir,
-                OBJ_ID,
-                SigmaSource::PatternImages,
-                window_radius_px,
-                erode_px,
-            )?;
+            let scene = load_scene(&dir, OBJ_ID, window_radius_px, erode_px)?;
             for trial in trials_of_scene(object, seed, &scene, &args.views, &noise, args.seed) {
                 let outcomes = run_trial(
                     &trial,

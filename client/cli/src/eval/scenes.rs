@@ -184,13 +184,6 @@ pub struct LoadedScene {
     pub views: Vec<LoadedView>,
 }
 
-/// Where σ_z comes from when a scene is read.
-#[derive(Clone, Copy, Debug)]
-pub enum SigmaSource {
-    /// From the pattern images (eq 1–5) with a noise model fitted to `glint/noise_shots`.
-    PatternImages,
-}
-
 fn pattern_as_normalised(image: PatternImage) -> (Image<f32>, u16) {
     match image {
         PatternImage::Bits8(img) => {
@@ -210,13 +203,12 @@ fn pattern_as_normalised(image: PatternImage) -> (Image<f32>, u16) {
 /// world points with σ_z (eq 1–7). Instances are identified across views by their world pose
 /// (the scene is static), so multi-view trials can stack one instance's points.
 ///
-/// `window_radius_px`: the matcher's window, over which eq 1–5 sums image gradients.
+/// `window_radius`: the matcher's window radius, px, over which eq 1–5 sums image gradients.
 /// `erode_px`: only mask pixels whose `(2·erode_px + 1)²` window lies inside the mask give
 /// points (see [`interior_mask`]); 0 keeps the whole mask.
 pub fn load_scene(
     scene_dir: &Path,
     obj_id: u32,
-    sigma: SigmaSource,
     window_radius: u32,
     erode_px: u32,
 ) -> anyhow::Result<LoadedScene> {
@@ -229,27 +221,23 @@ pub fn load_scene(
     }
     let layout = reader.layout().clone();
     let rig_path = layout.rig_json();
-    let (noise, rig) = match sigma {
-        SigmaSource::PatternImages => {
-            let rig = read_rig_json(&rig_path)?;
-            let glint_dir = layout.glint_dir();
-            let shot = |c| -> anyhow::Result<Image<f32>> {
-                let path = noise_shot_path(&glint_dir, c);
-                let img = image::open(&path)
-                    .with_context(|| format!("reading noise shot {}", path.display()))?
-                    .to_luma8();
-                let dn = Image::new(
-                    img.width(),
-                    img.height(),
-                    img.as_raw().iter().map(|&v| v as u16).collect(),
-                )?;
-                Ok(normalised_intensity(&dn, 255))
-            };
-            let model = NoiseModel::fit_from_pair(&shot('a')?, &shot('b')?, 255)
-                .with_context(|| format!("noise model of {}", scene_dir.display()))?;
-            (model, rig)
-        }
+    // σ_z from the pattern images (eq 1–5), with a noise model fitted to `glint/noise_shots`.
+    let rig = read_rig_json(&rig_path)?;
+    let glint_dir = layout.glint_dir();
+    let shot = |c| -> anyhow::Result<Image<f32>> {
+        let path = noise_shot_path(&glint_dir, c);
+        let img = image::open(&path)
+            .with_context(|| format!("reading noise shot {}", path.display()))?
+            .to_luma8();
+        let dn = Image::new(
+            img.width(),
+            img.height(),
+            img.as_raw().iter().map(|&v| v as u16).collect(),
+        )?;
+        Ok(normalised_intensity(&dn, 255))
     };
+    let noise = NoiseModel::fit_from_pair(&shot('a')?, &shot('b')?, 255)
+        .with_context(|| format!("noise model of {}", scene_dir.display()))?;
     let mut views = Vec::new();
     let mut instances_t_w_o: Vec<Isometry3<f64>> = Vec::new();
     for im_id in reader.image_ids() {
