@@ -183,3 +183,84 @@ fn eval_uncertainty_writes_the_scatter() {
     );
     assert!(out.join("scatter.png").exists() && out.join("report.md").exists());
 }
+
+#[test]
+fn eval_refine_runs_on_a_user_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = dir.path().join("bracket.ply");
+    let o = glint(&[
+        "mesh",
+        "export",
+        "--part",
+        "zigzag",
+        "--unit",
+        "mm",
+        "--out",
+        mesh.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let out = dir.path().join("table");
+    let run = |symmetry: &str, out: &std::path::Path| {
+        glint(&[
+            "eval",
+            "refine",
+            "--mesh",
+            mesh.to_str().unwrap(),
+            "--unit",
+            "mm",
+            "--symmetry",
+            symmetry,
+            "--scenes",
+            "1",
+            "--views-per-scene",
+            "1",
+            "--views",
+            "1",
+            "--instances",
+            "4",
+            "--spp",
+            "1",
+            "--tune-scenes",
+            "1",
+            "--icp-distances-mm",
+            "10",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let o = run("discrete:z:2", &out);
+    assert!(o.status.success(), "{}", text(&o));
+    // The mesh replaces the five parts: its file stem names its rows, and `all` is just it.
+    let rows = results(&std::fs::read_to_string(out.join("results.csv")).unwrap());
+    let mut groups: Vec<&str> = rows.keys().map(|(g, _, _)| g.as_str()).collect();
+    groups.sort();
+    groups.dedup();
+    assert_eq!(groups, ["all", "bracket"]);
+    for m in ["initial", "sdf", "icp"] {
+        let own = rows[&("bracket".to_owned(), 1, m.to_owned())];
+        assert!(own.0 > 0, "{m}: no trials");
+        assert_eq!(own, rows[&("all".to_owned(), 1, m.to_owned())], "{m}");
+    }
+    let trials = std::fs::read_to_string(out.join("trials.csv")).unwrap();
+    assert!(
+        trials.lines().skip(1).all(|l| l.starts_with("bracket,")),
+        "{trials}"
+    );
+
+    // A symmetry the mesh frame cannot have is a usage error (clap's exit code 2), a mesh
+    // that is not there names its path; neither writes anything.
+    let never = dir.path().join("never");
+    let o = run("discrete:w:2", &never);
+    let err = text(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("--symmetry") && err.contains("\"w\""), "{err}");
+    std::fs::remove_file(&mesh).unwrap();
+    let o = run("discrete:z:2", &never);
+    let err = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("bracket.ply") && !err.contains("panicked"),
+        "{err}"
+    );
+    assert!(!never.exists());
+}

@@ -18,10 +18,17 @@
 
 use glint_geometry::sdf::SdfGrid;
 use glint_geometry::se3;
-use nalgebra::{Isometry3, Matrix6, SymmetricEigen, Vector6};
+use nalgebra::{Isometry3, Matrix6, Point3, SymmetricEigen, Vector6};
 use rayon::prelude::*;
 
 use crate::points::DepthPoint;
+
+/// Voxel edge of the SDF grid the refiner is given by Glint's commands, mm. Finer than
+/// [`glint_geometry::sdf::SdfConfig`]'s 1 mm default: the Chrome Screw's 1 mm thread pitch and
+/// the Zigzag's thin strip alias in 1 mm voxels, which left refinements from clean scans
+/// 0.15–0.2 mm off where 0.5 mm voxels give 0.03–0.05 mm (`glint bench refine --sdf-voxel-mm`),
+/// about the spacing of the ICP baseline's 50 000 model samples.
+pub const REFINE_SDF_VOXEL_MM: f64 = 0.5;
 
 /// How the refiner runs. Lengths in metres.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,7 +56,15 @@ pub struct SdfRefineConfig {
     /// Inliers for the covariance: whitened residual within this at the solution. Default 3.
     pub inlier_k: f64,
     /// Converged when the step is below this in translation (m) and in rotation (rad).
+    /// Default 1 µm and 1 µrad, as Glint's ICP: far below the depth noise, and a damped step
+    /// this small is not worth another pass over the points.
     pub step_tolerance: f64,
+    /// Converged when a step the cost rejects is shorter than this many standard deviations
+    /// of the pose's own uncertainty, `√(δᵀ H δ)` with H the robust information of eq 9.
+    /// Default 1: the trilinear SDF makes the truncated cost rough at that scale, and damping
+    /// such a step further would cost a pass over the points per try for a change the data
+    /// cannot resolve. Accepted steps go on down to `step_tolerance`.
+    pub step_sigma_tolerance: f64,
     /// A pose whose object origin moves further than this in the world from the initial
     /// one (m) has diverged. Default 50 mm: far beyond the 30 mm an initial pose may be off.
     pub max_translation_change_m: f64,
@@ -66,7 +81,8 @@ impl Default for SdfRefineConfig {
             huber_k: 2.0,
             model_sigma_m: 0.3e-3,
             inlier_k: 3.0,
-            step_tolerance: 1e-7,
+            step_tolerance: 1e-6,
+            step_sigma_tolerance: 1.0,
             max_translation_change_m: 50e-3,
             min_inliers: 12,
         }
@@ -134,6 +150,96 @@ pub enum RefineError {
     },
 }
 
+/// A symmetric 6×6 sum of outer products `Σ w j jᵀ`, its lower triangle packed row by row
+/// (21 entries): half the multiply-adds of a dense update in the per-point loop.
+#[derive(Clone, Copy, Debug)]
+struct SymmetricSum6([f64; 21]);
+
+impl SymmetricSum6 {
+    const ZERO: Self = Self([0.0; 21]);
+
+    #[inline(always)]
+    fn add_outer(&mut self, j: &[f64; 6], w: f64) {
+        let mut k = 0;
+        for (row, &j_row) in j.iter().enumerate() {
+            let wj = w * j_row;
+            for &j_col in &j[..=row] {
+                self.0[k] += wj * j_col;
+                k += 1;
+            }
+        }
+    }
+
+    fn add(mut self, o: &Self) -> Self {
+        for (a, b) in self.0.iter_mut().zip(&o.0) {
+            *a += b;
+        }
+        self
+    }
+
+    fn to_matrix(self) -> Matrix6<f64> {
+        let mut m = Matrix6::zeros();
+        let mut k = 0;
+        for row in 0..6 {
+            for col in 0..=row {
+                m[(row, col)] = self.0[k];
+                m[(col, row)] = self.0[k];
+                k += 1;
+            }
+        }
+        m
+    }
+}
+
+/// Sums over the points at one pose, as the per-point loop accumulates them.
+#[derive(Clone, Copy, Debug)]
+struct PartialSums {
+    h: SymmetricSum6,
+    g: [f64; 6],
+    information: SymmetricSum6,
+    cost: f64,
+    gated: usize,
+    inliers: usize,
+    inlier_sq: f64,
+}
+
+impl PartialSums {
+    const ZERO: Self = Self {
+        h: SymmetricSum6::ZERO,
+        g: [0.0; 6],
+        information: SymmetricSum6::ZERO,
+        cost: 0.0,
+        gated: 0,
+        inliers: 0,
+        inlier_sq: 0.0,
+    };
+
+    fn add(mut self, o: Self) -> Self {
+        self.h = self.h.add(&o.h);
+        for (a, b) in self.g.iter_mut().zip(&o.g) {
+            *a += b;
+        }
+        self.information = self.information.add(&o.information);
+        self.cost += o.cost;
+        self.gated += o.gated;
+        self.inliers += o.inliers;
+        self.inlier_sq += o.inlier_sq;
+        self
+    }
+
+    fn finish(self) -> Normal {
+        Normal {
+            h: self.h.to_matrix(),
+            g: Vector6::from(self.g),
+            information: self.information.to_matrix(),
+            cost: self.cost,
+            gated: self.gated,
+            inliers: self.inliers,
+            inlier_sq: self.inlier_sq,
+        }
+    }
+}
+
 /// Sums over the points at one pose.
 #[derive(Clone, Copy, Debug)]
 struct Normal {
@@ -147,30 +253,6 @@ struct Normal {
     gated: usize,
     inliers: usize,
     inlier_sq: f64,
-}
-
-impl Normal {
-    fn zero() -> Self {
-        Self {
-            h: Matrix6::zeros(),
-            g: Vector6::zeros(),
-            information: Matrix6::zeros(),
-            cost: 0.0,
-            gated: 0,
-            inliers: 0,
-            inlier_sq: 0.0,
-        }
-    }
-    fn add(mut self, o: Self) -> Self {
-        self.h += o.h;
-        self.g += o.g;
-        self.information += o.information;
-        self.cost += o.cost;
-        self.gated += o.gated;
-        self.inliers += o.inliers;
-        self.inlier_sq += o.inlier_sq;
-        self
-    }
 }
 
 /// Huber cost ρ(e) = e²/2 for |e| ≤ k, k|e| − k²/2 beyond, and its IRLS weight ρ'(e)/e.
@@ -195,12 +277,15 @@ fn accumulate(
     const CHUNK: usize = 1024;
     let model_var = config.model_sigma_m * config.model_sigma_m;
     let outlier_cost = huber(gate_m / config.model_sigma_m, config.huber_k).0;
+    // The pose as a matrix once, not a quaternion rotation per point.
+    let rot_o_w = t_o_w.rotation.to_rotation_matrix().into_inner();
+    let trans_o_w = t_o_w.translation.vector;
     points
         .par_chunks(CHUNK)
         .map(|chunk| {
-            let mut acc = Normal::zero();
+            let mut acc = PartialSums::ZERO;
             for point in chunk {
-                let p_o = t_o_w * point.p_w;
+                let p_o = Point3::from(rot_o_w * point.p_w.coords + trans_o_w);
                 let s = sdf.sample(&p_o);
                 let r = s.distance_m;
                 if !s.inside_grid || r.abs() > gate_m {
@@ -213,27 +298,43 @@ fn accumulate(
                 let n = s.gradient;
                 // eq 10: J = ∇ᵀ [I | −[p_o]×] = (∇, p_o × ∇).
                 let rot = p_o.coords.cross(&n);
-                let j = Vector6::new(n.x, n.y, n.z, rot.x, rot.y, rot.z);
+                let j = [n.x, n.y, n.z, rot.x, rot.y, rot.z];
                 // eq 11: G = ∇ᵀ R_o_w ∂p_w/∂z.
-                let gz = n.dot(&(t_o_w.rotation * point.dp_dz_w));
+                let gz = n.dot(&(rot_o_w * point.dp_dz_w));
                 let var = gz * gz * point.sigma_z_m * point.sigma_z_m + model_var;
-                let inv_sigma = var.sqrt().recip();
-                let e = r * inv_sigma;
+                let inv_var = var.recip();
+                let e = r * inv_var.sqrt();
                 let (rho, weight) = huber(e, config.huber_k);
-                let w = weight / var;
-                acc.h += j * j.transpose() * w;
-                acc.g += j * (w * r);
+                let w = weight * inv_var;
+                acc.h.add_outer(&j, w);
+                let wr = w * r;
+                for (g, jk) in acc.g.iter_mut().zip(&j) {
+                    *g += jk * wr;
+                }
                 acc.cost += rho;
                 acc.gated += 1;
                 if e.abs() <= config.inlier_k {
-                    acc.information += j * j.transpose() / var;
+                    acc.information.add_outer(&j, inv_var);
                     acc.inliers += 1;
                     acc.inlier_sq += r * r;
                 }
             }
             acc
         })
-        .reduce(Normal::zero, Normal::add)
+        .reduce(|| PartialSums::ZERO, PartialSums::add)
+        .finish()
+}
+
+/// A step below `tolerance` in translation (m) and in rotation (rad).
+#[inline]
+fn is_below(step: &Vector6<f64>, tolerance: f64) -> bool {
+    step.fixed_rows::<3>(0).norm() < tolerance && step.fixed_rows::<3>(3).norm() < tolerance
+}
+
+/// The squared length of `step` in standard deviations of a pose with information `h`.
+#[inline]
+fn step_sigmas_sq(step: &Vector6<f64>, h: &Matrix6<f64>) -> f64 {
+    step.dot(&(h * step))
 }
 
 /// The refiner's objective at `t_o_w` with the final gate: Σ ρ(r/σ), outliers at the
@@ -343,6 +444,9 @@ pub fn refine_sdf(
                     lambda *= 10.0;
                     continue;
                 };
+                if is_below(&step, config.step_tolerance) {
+                    break; // not worth a pass over the points: a minimum
+                }
                 let candidate = se3::perturb_left(&step, &t_o_w);
                 let trial = accumulate(sdf, points, &candidate, config, gate);
                 point_passes += 1;
@@ -350,12 +454,19 @@ pub fn refine_sdf(
                     accepted = Some((step, candidate, trial));
                     break;
                 }
+                if step_sigmas_sq(&step, &normal.h)
+                    < config.step_sigma_tolerance * config.step_sigma_tolerance
+                {
+                    break; // rejected within the pose's own uncertainty: a minimum
+                }
                 lambda *= 10.0;
             }
             let Some((step, candidate, trial)) = accepted else {
-                status = RefineStatus::Converged; // no damped step lowers the cost: a minimum
+                // No damped step lowers the cost, or none is worth trying: a minimum.
+                status = RefineStatus::Converged;
                 break;
             };
+            let small = is_below(&step, config.step_tolerance);
             t_o_w = candidate;
             normal = trial;
             lambda = (lambda * 0.1).max(1e-7);
@@ -368,8 +479,6 @@ pub fn refine_sdf(
                 status = RefineStatus::Diverged;
                 break 'stages;
             }
-            let small = step.fixed_rows::<3>(0).norm() < config.step_tolerance
-                && step.fixed_rows::<3>(3).norm() < config.step_tolerance;
             if small {
                 status = RefineStatus::Converged;
                 break;

@@ -49,6 +49,9 @@ pub struct RefineBenchArgs {
     /// Surface samples of the ICP model (and of the exported model.ply).
     #[arg(long, default_value_t = 50_000)]
     pub model_samples: usize,
+    /// Voxel size of the SDF grid, mm (the padding is 10 mm).
+    #[arg(long, default_value_t = glint_estimation::refine::REFINE_SDF_VOXEL_MM)]
+    pub sdf_voxel_mm: f64,
     /// Depth noise σ_z along the view ray, mm.
     #[arg(long, default_value_t = 0.3)]
     pub sigma_z_mm: f64,
@@ -184,8 +187,12 @@ pub fn run(args: &RefineBenchArgs) -> anyhow::Result<()> {
     for (part_index, &part) in args.parts.0.iter().enumerate() {
         bar.set_message(part.name());
         let mesh = part.mesh();
-        let sdf = SdfGrid::build(&mesh, &SdfConfig::default())
-            .with_context(|| format!("building the SDF of {part}"))?;
+        let grid_config = SdfConfig {
+            voxel_size_m: args.sdf_voxel_mm * 1e-3,
+            ..SdfConfig::default()
+        };
+        let sdf = SdfGrid::build(&mesh, &grid_config)
+            .with_context(|| format!("--sdf-voxel-mm: building the SDF of {part}"))?;
         let model_samples = surface_samples(&mesh, args.model_samples, args.seed ^ 0x5eed);
         let icp_model = IcpModel::new(&model_samples)
             .with_context(|| format!("building the ICP model of {part}"))?;

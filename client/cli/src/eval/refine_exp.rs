@@ -82,7 +82,7 @@ pub struct RefineArgs {
     #[arg(long)]
     pub erode_px: Option<u32>,
     /// Voxel size of the SDF grid, mm (the padding is 10 mm).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = glint_estimation::refine::REFINE_SDF_VOXEL_MM)]
     pub sdf_voxel_mm: f64,
     /// Output directory (scenes are cached in DIR/scenes and reused when rerun).
     #[arg(long)]
