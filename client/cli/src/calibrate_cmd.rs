@@ -71,16 +71,23 @@ pub struct BsdfArgs {
     /// `decorrelated` (an independent estimate: unbiased, one more render per pixel).
     #[arg(long, default_value = "decorrelated", value_parser = parse_residual)]
     pub residual: Residual,
-    /// The loss: `l2` (Σ (r − t)² / Σ t², the paper's) or `ln` (squared error of ln radiance,
-    /// ε = 1 % of the mean target: every pixel counts alike).
+    /// The loss: `l2` (Σ (r − t)² / Σ t², the paper's), `ln` (squared error of ln radiance,
+    /// ε = 1 % of the mean target: every pixel counts alike) or `huber` (L2 up to δ = the
+    /// 90th percentile of the target, linear beyond: fireflies get a bounded pull).
     #[arg(long, value_enum, default_value_t = LossArg::L2)]
     pub loss: LossArg,
+    /// Compare the mean radiance of B × B pixel blocks instead of pixels (1: pixels): averages
+    /// the Monte Carlo noise of render and capture alike. Blocks gather the pixels kept by
+    /// --pixel-step.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub block_px: u32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum LossArg {
     L2,
     Ln,
+    Huber,
 }
 
 fn parse_residual(s: &str) -> Result<Residual, String> {
@@ -374,6 +381,18 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
                 floor: (0.01 * sum / n.max(1) as f64) as f32,
             }
         }
+        LossArg::Huber => {
+            // δ: the 90th percentile of the target radiance.
+            let mut all: Vec<f32> = views
+                .iter()
+                .flat_map(|v| v.target.radiance.iter().copied())
+                .filter(|r| r.is_finite())
+                .collect();
+            all.sort_by(f32::total_cmp);
+            Loss::Huber {
+                delta: all.get(all.len() * 9 / 10).copied().unwrap_or(1.0),
+            }
+        }
     };
     let problem = FitProblem {
         scene: &loaded.scene,
@@ -382,6 +401,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         rendering,
         residual: args.residual,
         loss,
+        block_px: args.block_px,
     };
     let config = FitConfig {
         iterations: args.iterations,
@@ -418,6 +438,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         "samples_per_pixel": rendering.samples_per_pixel,
         "residual": format!("{:?}", args.residual),
         "loss": format!("{loss:?}"),
+        "block_px": args.block_px,
         "pixel_step": step,
         "pixels": result.pixels,
         "per_view": per_view,
@@ -650,6 +671,7 @@ fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
             rendering,
             residual: Residual::SameSamples,
             loss: Loss::L2,
+            block_px: 1,
         };
         let [loss_fitted, loss_truth] =
             [&fitted, &truth].map(|m| problem.loss_and_gradient(m, free_of(m)).0);

@@ -131,6 +131,11 @@ pub struct FitProblem<'a> {
     /// How the gradient's residual is estimated (matters with multi-path only).
     pub residual: Residual,
     pub loss: Loss,
+    /// Side of the square pixel blocks the loss compares, pixels: 1 compares pixels; b > 1
+    /// compares each b × b block's mean radiance (rendered against measured, over the block's
+    /// target pixels), which averages the Monte Carlo noise of both by the block's pixel
+    /// count, at the price of detail. Each block weighs by its pixel count.
+    pub block_px: u32,
 }
 
 /// The per-pixel loss ℓ(r, t) summed over the target pixels.
@@ -141,6 +146,10 @@ pub enum Loss {
     /// L = Σ (ln(r + ε) − ln(t + ε))² / N, ε = `floor` (W·sr⁻¹·m⁻²): every pixel weighs
     /// alike whatever its brightness, relative errors count.
     LnRadiance { floor: f32 },
+    /// Huber: (r − t)² within ±δ, 2δ|r − t| − δ² beyond (δ = `delta`, W·sr⁻¹·m⁻²), over
+    /// Σ t²: L2 for ordinary pixels, a bounded slope for Monte Carlo fireflies (in the render
+    /// or the capture) that would otherwise dominate.
+    Huber { delta: f32 },
 }
 
 impl Loss {
@@ -152,6 +161,18 @@ impl Loss {
                 let e = floor as f64;
                 let d = (r.max(0.0) + e).ln() - (t + e).ln();
                 (d * d, 2.0 * d / (r.max(0.0) + e), 1.0)
+            }
+            Loss::Huber { delta } => {
+                let (d, delta) = (r - t, delta as f64);
+                if d.abs() <= delta {
+                    (d * d, 2.0 * d, t * t)
+                } else {
+                    (
+                        2.0 * delta * d.abs() - delta * delta,
+                        2.0 * delta * d.signum(),
+                        t * t,
+                    )
+                }
             }
         }
     }
@@ -207,7 +228,10 @@ pub fn free_of<T: Copy>(p: &PrincipledParams<T>) -> [T; FREE] {
     [p.base_color, p.metallic, p.roughness, p.specular]
 }
 
-/// Sums of a loss pass: squared error, its gradient, Σ t², pixels.
+/// A target pixel in the loss: view index, pixel (u, v), target radiance.
+type LossPixel = (usize, (u32, u32), f32);
+
+/// Sums of a loss pass: loss, its gradient, normalisation, pixels.
 type Sums = (f64, [f64; FREE], f64, usize);
 
 fn add_sums(a: Sums, b: Sums) -> Sums {
@@ -314,19 +338,24 @@ impl FitProblem<'_> {
             .map(|s| s.radiance)
     }
 
-    /// Every view's target pixels with a usable (finite, positive) target, flattened.
-    fn loss_pixels(&self) -> impl ParallelIterator<Item = (usize, (u32, u32), f32)> + '_ {
-        self.views
-            .par_iter()
-            .enumerate()
-            .flat_map_iter(|(k, view)| {
-                view.target
-                    .pixels
-                    .iter()
-                    .zip(&view.target.radiance)
-                    .filter(|(_, t)| t.is_finite() && **t > 0.0)
-                    .map(move |(&p, &t)| (k, p, t))
-            })
+    /// Every view's target pixels with a usable (finite, positive) target, grouped into the
+    /// loss's blocks ([`FitProblem::block_px`]).
+    fn loss_groups(&self) -> Vec<Vec<LossPixel>> {
+        let b = self.block_px.max(1);
+        let mut groups = Vec::new();
+        for (k, view) in self.views.iter().enumerate() {
+            let mut blocks: std::collections::BTreeMap<(u32, u32), Vec<_>> = Default::default();
+            for (&(u, v), &t) in view.target.pixels.iter().zip(&view.target.radiance) {
+                if t.is_finite() && t > 0.0 {
+                    blocks
+                        .entry((u / b, v / b))
+                        .or_default()
+                        .push((k, (u, v), t));
+                }
+            }
+            groups.extend(blocks.into_values());
+        }
+        groups
     }
 
     /// The rendered radiance of every view's target pixels for `params` (NaN where the pixel
@@ -368,23 +397,41 @@ impl FitProblem<'_> {
         let plain = with_free(*fixed, free);
         let zero = || (0.0f64, [0.0f64; FREE], 0.0f64, 0usize);
         let (sse, grad, norm, n) = self
-            .loss_pixels()
-            .fold(zero, |(mut sse, mut grad, mut norm, mut n), (k, p, t)| {
-                if let Some(radiance) = self.shade(k, p, &seeded[0], None) {
-                    let (value, mut slope, weight) = self.loss.pixel(radiance.re as f64, t as f64);
-                    sse += value;
-                    if decorrelated {
-                        let other = self.shade_seeded(k, p, &plain, None, DECORRELATED_SEED_OFFSET);
-                        slope = self.loss.pixel(other.unwrap_or(0.0) as f64, t as f64).1;
-                    }
-                    grad[0] += slope * radiance.eps as f64;
+            .loss_groups()
+            .par_iter()
+            .fold(zero, |(mut sse, mut grad, mut norm, mut n), group| {
+                // Sums over the group's pixels that see a fitted instance.
+                let (mut r, mut r_other, mut t, mut d, mut m) = (0.0, 0.0, 0.0, [0.0; FREE], 0);
+                for &(k, p, tp) in group {
+                    let Some(radiance) = self.shade(k, p, &seeded[0], None) else {
+                        continue;
+                    };
+                    r += radiance.re as f64;
+                    d[0] += radiance.eps as f64;
                     for (i, s) in seeded.iter().enumerate().skip(1) {
                         // Same rays, same random numbers: only the seeded derivative differs.
-                        let d = self.shade(k, p, s, None).map_or(0.0, |s| s.eps);
-                        grad[i] += slope * d as f64;
+                        d[i] += self.shade(k, p, s, None).map_or(0.0, |s| s.eps) as f64;
                     }
-                    norm += weight;
-                    n += 1;
+                    if decorrelated {
+                        let other = self.shade_seeded(k, p, &plain, None, DECORRELATED_SEED_OFFSET);
+                        r_other += other.unwrap_or(0.0) as f64;
+                    }
+                    t += tp as f64;
+                    m += 1;
+                }
+                if m > 0 {
+                    let mf = m as f64;
+                    let (value, mut slope, weight) = self.loss.pixel(r / mf, t / mf);
+                    if decorrelated {
+                        slope = self.loss.pixel(r_other / mf, t / mf).1;
+                    }
+                    // m·ℓ(r̄, t̄): its derivative is m·ℓ'·Σ∂r/m = ℓ'·Σ∂r.
+                    sse += mf * value;
+                    for (g, di) in grad.iter_mut().zip(d) {
+                        *g += slope * di;
+                    }
+                    norm += mf * weight;
+                    n += m;
                 }
                 (sse, grad, norm, n)
             })
@@ -410,13 +457,23 @@ impl FitProblem<'_> {
         let sampling = with_free(*fixed, sampled_at);
         let zero = || (0.0f64, [0.0f64; FREE], 0.0f64, 0usize);
         let (sse, _, norm, n) = self
-            .loss_pixels()
-            .fold(zero, |(mut sse, g, mut norm, mut n), (k, p, t)| {
-                if let Some(radiance) = self.shade(k, p, &params, Some(&sampling)) {
-                    let (value, _, weight) = self.loss.pixel(radiance as f64, t as f64);
-                    sse += value;
-                    norm += weight;
-                    n += 1;
+            .loss_groups()
+            .par_iter()
+            .fold(zero, |(mut sse, g, mut norm, mut n), group| {
+                let (mut r, mut t, mut m) = (0.0, 0.0, 0);
+                for &(k, p, tp) in group {
+                    if let Some(radiance) = self.shade(k, p, &params, Some(&sampling)) {
+                        r += radiance as f64;
+                        t += tp as f64;
+                        m += 1;
+                    }
+                }
+                if m > 0 {
+                    let mf = m as f64;
+                    let (value, _, weight) = self.loss.pixel(r / mf, t / mf);
+                    sse += mf * value;
+                    norm += mf * weight;
+                    n += m;
                 }
                 (sse, g, norm, n)
             })

@@ -84,6 +84,7 @@ fn gradient_matches_central_differences() {
         rendering: PixelRendering::SINGLE_PATH,
         residual: Residual::SameSamples,
         loss: Loss::L2,
+        block_px: 1,
     };
     let fixed = FitConfig::default().fixed;
     for at in [[0.5f32; FREE], [0.3, 0.7, 0.4, 0.2]] {
@@ -128,6 +129,7 @@ fn fit_of(truth: PrincipledParams<f32>) -> (FitResult, f64) {
         rendering: PixelRendering::SINGLE_PATH,
         residual: Residual::SameSamples,
         loss: Loss::L2,
+        block_px: 1,
     };
     let result = problem.fit(&FitConfig::default()).unwrap();
     let rendered = problem.render(&result.params);
@@ -213,6 +215,7 @@ fn bad_problems_are_rejected() {
         rendering: PixelRendering::SINGLE_PATH,
         residual: Residual::SameSamples,
         loss: Loss::L2,
+        block_px: 1,
     };
     assert_eq!(
         problem.fit(&FitConfig::default()).unwrap_err(),
@@ -337,6 +340,7 @@ fn multi_path_gradient_matches_central_differences_with_frozen_sampling() {
         rendering,
         residual: Residual::SameSamples,
         loss: Loss::L2,
+        block_px: 1,
     };
     let fixed = FitConfig::default().fixed;
     // The wall really reflects light back: multi-path differs from single-path on the sphere.
@@ -350,7 +354,26 @@ fn multi_path_gradient_matches_central_differences_with_frozen_sampling() {
         multi_total > 1.03 * single_total,
         "Σ radiance: multi-path {multi_total} vs single-path {single_total}"
     );
-    for at in [[0.5f32; FREE], [0.3, 0.7, 0.35, 0.2]] {
+    // Pixels, 6 × 6 blocks (about four target pixels each on the 3-px grid), and the Huber
+    // loss with δ at the median target (both of its branches in play).
+    let blocks = FitProblem {
+        block_px: 6,
+        ..problem
+    };
+    let mut sorted = views[0].target.radiance.clone();
+    sorted.sort_by(f32::total_cmp);
+    let huber = FitProblem {
+        loss: Loss::Huber {
+            delta: sorted[sorted.len() / 2],
+        },
+        ..problem
+    };
+    for (problem, at) in [
+        (&problem, [0.5f32; FREE]),
+        (&problem, [0.3, 0.7, 0.35, 0.2]),
+        (&blocks, [0.3, 0.7, 0.35, 0.2]),
+        (&huber, [0.3, 0.7, 0.35, 0.2]),
+    ] {
         let (loss, grad, _) = problem.loss_and_gradient(&fixed, at);
         // Frozen sampling at `at` itself is the ordinary estimator, up to f32 rounding of
         // eval/pdf against the sample's weight (~1e-6 relative per path).
@@ -376,8 +399,9 @@ fn multi_path_gradient_matches_central_differences_with_frozen_sampling() {
                 / (2.0 * h as f64);
             assert!(
                 (fd - grad[i]).abs() < 0.002 * g_max,
-                "multi-path ∂L/∂{} at {at:?}: dual {} vs central difference {fd}",
+                "multi-path ∂L/∂{} at {at:?}, blocks of {} px: dual {} vs central difference {fd}",
                 FREE_NAMES[i],
+                problem.block_px,
                 grad[i]
             );
         }
