@@ -81,6 +81,10 @@ pub struct BsdfArgs {
     /// --pixel-step.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub block_px: u32,
+    /// Fresh Monte Carlo samples every iteration (stochastic gradient descent) instead of the
+    /// same samples throughout.
+    #[arg(long)]
+    pub reseed: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -405,6 +409,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
     };
     let config = FitConfig {
         iterations: args.iterations,
+        reseed: args.reseed,
         ..FitConfig::default()
     };
     let bar = crate::progress::bar(args.iterations as u64, "BSDF fit");
@@ -439,6 +444,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         "residual": format!("{:?}", args.residual),
         "loss": format!("{loss:?}"),
         "block_px": args.block_px,
+        "reseed": args.reseed,
         "pixel_step": step,
         "pixels": result.pixels,
         "per_view": per_view,

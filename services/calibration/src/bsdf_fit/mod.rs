@@ -86,7 +86,15 @@ pub struct FitConfig {
     pub start: f32,
     /// Values of the parameters that are not free.
     pub fixed: PrincipledParams<f32>,
+    /// Fresh random numbers every iteration (seed + k·[`RESEED_STRIDE`]): stochastic gradient
+    /// descent, whose Adam averages the Monte Carlo noise of the gradient over iterations.
+    /// Without it every iteration reuses the same samples (common random numbers): a
+    /// deterministic loss, but one whose noise the optimiser can fit.
+    pub reseed: bool,
 }
+
+/// Seed step between iterations with [`FitConfig::reseed`].
+pub const RESEED_STRIDE: u64 = 0x9E37_79B9;
 
 impl Default for FitConfig {
     fn default() -> Self {
@@ -98,6 +106,7 @@ impl Default for FitConfig {
             beta2: 0.999,
             start: 0.5,
             fixed: PrincipledParams::new(0.5, 0.5, 0.5, 0.5).expect("constants are valid"),
+            reseed: false,
         }
     }
 }
@@ -520,7 +529,19 @@ impl FitProblem<'_> {
         let decay = (config.final_learning_rate / config.learning_rate) as f64;
         let mut pixels = 0;
         for k in 0..config.iterations {
-            let (l, g, n) = self.loss_and_gradient(&config.fixed, x);
+            let seed_offset = if config.reseed {
+                (k as u64).wrapping_mul(RESEED_STRIDE)
+            } else {
+                0
+            };
+            let this_step = FitProblem {
+                rendering: PixelRendering {
+                    seed: self.rendering.seed.wrapping_add(seed_offset),
+                    ..self.rendering
+                },
+                ..*self
+            };
+            let (l, g, n) = this_step.loss_and_gradient(&config.fixed, x);
             if n == 0 {
                 return Err(FitError::NoPixels {
                     pixels: self.views.iter().map(|v| v.target.pixels.len()).sum(),
