@@ -8,21 +8,20 @@ use std::time::Instant;
 
 use anyhow::Context;
 use glint_calibration::bsdf_fit::{
-    FREE_NAMES, FitConfig, FitProblem, FitTarget, PixelRendering, error_map_png, fit_history_png,
-    measured_target,
+    FREE_NAMES, FitConfig, FitProblem, FitTarget, FitView, Loss, MeasuredTarget, PixelRendering,
+    Residual, error_map_png, fit_history_png, free_of, measured_target,
 };
+use glint_calibration::material_map::{params_from_map, params_to_map};
 use glint_calibration::response::{
     DebevecConfig, ExposureStack, ResponseTable, calibrate, response_png,
 };
-use glint_calibration::scene_file::{CalibrationScene, params_from_map, params_to_map};
-use glint_camera::bin::BinSpec;
 use glint_geometry::io::write_file_atomically;
-use glint_geometry::parts::Part;
+use glint_render::bsdf::PrincipledParams;
 use glint_render::integrator::{LightTransport, path_pixel};
 use glint_render::projector::Pattern;
-use glint_render::rig::SliRig;
-use glint_render::scene::{Scene, SceneInstance};
 use glint_render::sensor::ResponseCurve;
+
+use crate::calibrate_scene::{self, CalibrationScene};
 use rayon::prelude::*;
 
 #[derive(clap::Subcommand)]
@@ -31,7 +30,7 @@ pub enum CalibrateCommand {
     Response(ResponseArgs),
     /// Evaluation only: a recovered response against a ground-truth sensor file.
     EvalResponse(EvalResponseArgs),
-    /// Principled-BSDF parameters of the part in a calibration scene (differentiable rendering).
+    /// Principled-BSDF parameters of the part in a capture (differentiable rendering).
     Bsdf(BsdfArgs),
     /// Evaluation only: a fitted material against the ground truth, at the fitted and a
     /// held-out view.
@@ -40,16 +39,21 @@ pub enum CalibrateCommand {
 
 #[derive(clap::Args)]
 pub struct BsdfArgs {
-    /// Calibration scene directory (calib_scene.json, exposure_stack/).
+    /// The capture: the folder `glint capture --exposure-stack … --out DIR` wrote (DIR, or its
+    /// BOP scene DIR/test/000001): labelled poses, camera poses, rig, reference surface and
+    /// exposure stacks (ground-truth files are not read).
     #[arg(long)]
     pub scene: PathBuf,
     /// The camera response from `glint calibrate response`.
     #[arg(long)]
     pub response: PathBuf,
     /// Output material JSON; `<stem>.history.png` (loss and parameters) and `<stem>.error.png`
-    /// (|fitted − target| map) are written beside it.
+    /// (|fitted − target| map of the first view) are written beside it.
     #[arg(long)]
     pub out: PathBuf,
+    /// Views (image ids) whose radiance maps enter the loss, comma separated.
+    #[arg(long, value_delimiter = ',', default_value = "0")]
+    pub views: Vec<u32>,
     /// Adam iterations.
     #[arg(long, default_value_t = 300)]
     pub iterations: usize,
@@ -63,6 +67,39 @@ pub struct BsdfArgs {
     /// Use every N-th object pixel in u and v.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
     pub pixel_step: u32,
+    /// The gradient's residual with multi-path: `same` (the samples of the derivative) or
+    /// `decorrelated` (an independent estimate: unbiased, one more render per pixel).
+    #[arg(long, default_value = "decorrelated", value_parser = parse_residual)]
+    pub residual: Residual,
+    /// The loss: `l2` (Σ (r − t)² / Σ t², the paper's), `ln` (squared error of ln radiance,
+    /// ε = 1 % of the mean target: every pixel counts alike) or `huber` (L2 up to δ = the
+    /// 90th percentile of the target, linear beyond: fireflies get a bounded pull).
+    #[arg(long, value_enum, default_value_t = LossArg::L2)]
+    pub loss: LossArg,
+    /// Compare the mean radiance of B × B pixel blocks instead of pixels (1: pixels): averages
+    /// the Monte Carlo noise of render and capture alike. Blocks gather the pixels kept by
+    /// --pixel-step.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub block_px: u32,
+    /// Fresh Monte Carlo samples every iteration (stochastic gradient descent) instead of the
+    /// same samples throughout.
+    #[arg(long)]
+    pub reseed: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum LossArg {
+    L2,
+    Ln,
+    Huber,
+}
+
+fn parse_residual(s: &str) -> Result<Residual, String> {
+    match s {
+        "same" => Ok(Residual::SameSamples),
+        "decorrelated" => Ok(Residual::Decorrelated),
+        _ => Err(format!("residual {s:?} must be `same` or `decorrelated`")),
+    }
 }
 
 /// How to render pixels: `spp` samples with multi-path, one with single-path.
@@ -89,14 +126,19 @@ fn parse_transport(s: &str) -> Result<LightTransport, String> {
 
 #[derive(clap::Args)]
 pub struct EvalBsdfArgs {
+    /// The capture the material was fitted on (as for `calibrate bsdf`).
     #[arg(long)]
     pub scene: PathBuf,
     /// A material written by `glint calibrate bsdf`.
     #[arg(long)]
     pub material: PathBuf,
-    /// Ground-truth material (name → value JSON), e.g. DIR/gt/gt_material.json.
+    /// Ground-truth material: the capture's `glint/gt_materials.json` (the default) or a
+    /// name → value JSON.
     #[arg(long)]
-    pub gt_material: PathBuf,
+    pub gt_material: Option<PathBuf>,
+    /// The held-out view (image id); default: the first view the fit did not use.
+    #[arg(long)]
+    pub held_out_view: Option<u32>,
     /// Optional PNG: |fitted − ground truth| radiance at the held-out view.
     #[arg(long)]
     pub error_map: Option<PathBuf>,
@@ -105,6 +147,12 @@ pub struct EvalBsdfArgs {
     pub transport: LightTransport,
     #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=256))]
     pub spp: u32,
+    /// Optional: the response the fit used. Then the L2 loss against the measured radiance
+    /// of the fitted views is printed for the fitted and the true material: a true material
+    /// with the lower loss means the optimiser stopped short; with the higher loss, the
+    /// measurement or the scene model is off.
+    #[arg(long)]
+    pub response: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -248,72 +296,6 @@ fn eval_response(args: &EvalResponseArgs) -> anyhow::Result<()> {
 /// Format tag of a fitted material file.
 const MATERIAL_FORMAT: &str = "glint-material/1";
 
-/// A calibration scene as the renderer needs it: the part (scene instance 0) in the bin
-/// (instance 1), the rig, the fitted and held-out views.
-struct LoadedScene {
-    file: CalibrationScene,
-    scene: Scene,
-    rig: SliRig,
-    t_w_c: nalgebra::Isometry3<f64>,
-    held_out_t_w_c: nalgebra::Isometry3<f64>,
-}
-
-/// Scene indices of the part and the bin in [`LoadedScene::scene`].
-const PART_INSTANCE: u32 = 0;
-const BIN_INSTANCE: u32 = 1;
-
-fn load_scene(dir: &Path) -> anyhow::Result<LoadedScene> {
-    let file = CalibrationScene::load(&dir.join("calib_scene.json")).map_err(anyhow::Error::msg)?;
-    let part: Part = file
-        .part
-        .parse()
-        .map_err(|e: String| anyhow::anyhow!("calib_scene.json: part: {e}"))?;
-    let reference = file.reference().map_err(anyhow::Error::msg)?;
-    let t_w_o = file
-        .t_w_o
-        .to_isometry("t_w_o")
-        .map_err(anyhow::Error::msg)?;
-    let t_w_c = file
-        .t_w_c
-        .to_isometry("t_w_c")
-        .map_err(anyhow::Error::msg)?;
-    let held_out_t_w_c = file
-        .held_out_t_w_c
-        .to_isometry("held_out_t_w_c")
-        .map_err(anyhow::Error::msg)?;
-    let [w, h] = file.resolution;
-    let rig = SliRig::ensenso_n35()
-        .resized(w, h)
-        .with_context(|| format!("calib_scene.json: resolution {w}×{h}"))?;
-    // The bin carries the scene file's reference material; the part's is a placeholder (the fit
-    // and the evaluation shade it with their own).
-    let scene = Scene::build(
-        &[part.mesh(), BinSpec::default().mesh()],
-        vec![
-            SceneInstance {
-                mesh: 0,
-                t_w_o,
-                material: 0,
-                label: 1,
-            },
-            SceneInstance {
-                mesh: 1,
-                t_w_o: nalgebra::Isometry3::identity(),
-                material: 1,
-                label: 2,
-            },
-        ],
-        vec![reference, reference],
-    )?;
-    Ok(LoadedScene {
-        file,
-        scene,
-        rig,
-        t_w_c,
-        held_out_t_w_c,
-    })
-}
-
 fn stem_with(path: &Path, suffix: &str) -> PathBuf {
     let stem = path
         .file_stem()
@@ -321,89 +303,187 @@ fn stem_with(path: &Path, suffix: &str) -> PathBuf {
     path.with_file_name(format!("{stem}.{suffix}"))
 }
 
-fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
-    let loaded = load_scene(&args.scene)?;
-    let stack = ExposureStack::load(&args.scene.join("exposure_stack"))?;
-    let table = ResponseTable::load(&args.response)?;
-    let radiance_map = table.radiance_map(&stack)?;
-    let [camera, _] = loaded.rig.cameras(&loaded.t_w_c);
-    let projector = loaded.rig.projector(&loaded.t_w_c, Pattern::White);
-    let reference = loaded.file.reference().map_err(anyhow::Error::msg)?;
-    let rendering = rendering_of(args.transport, args.spp, 1);
-    let measured = measured_target(
-        &loaded.scene,
-        &camera,
-        &projector,
-        PART_INSTANCE,
-        BIN_INSTANCE,
-        &reference,
-        &radiance_map,
-        &rendering,
-    )?;
-    let step = args.pixel_step;
-    let mut target = FitTarget::default();
-    for (&(u, v), &r) in measured.target.pixels.iter().zip(&measured.target.radiance) {
-        if u % step == 0 && v % step == 0 {
-            target.pixels.push((u, v));
-            target.radiance.push(r);
+/// Fails unless `views` names distinct views of `loaded`.
+fn check_views(loaded: &CalibrationScene, views: &[u32]) -> anyhow::Result<()> {
+    for (i, im_id) in views.iter().enumerate() {
+        loaded.view(*im_id).context("--views")?;
+        if views[..i].contains(im_id) {
+            anyhow::bail!("--views: view {im_id} is given twice");
         }
     }
+    Ok(())
+}
+
+/// Per view (image id) of `views`: the fit's view (camera, projector, object pixels on every
+/// `step`-th row and column with their measured radiance) and the measured target it came from.
+fn fit_views(
+    loaded: &CalibrationScene,
+    table: &ResponseTable,
+    views: &[u32],
+    rendering: &PixelRendering,
+    step: u32,
+) -> anyhow::Result<(Vec<FitView>, Vec<MeasuredTarget>)> {
+    let mut fit_views = Vec::with_capacity(views.len());
+    let mut measured_views = Vec::with_capacity(views.len());
+    for &im_id in views {
+        let view = loaded.view(im_id)?;
+        let stack = ExposureStack::load(&view.stack_dir)?;
+        let radiance_map = table.radiance_map(&stack)?;
+        let [camera, _] = loaded.rig.cameras(&view.t_w_c);
+        let projector = loaded.rig.projector(&view.t_w_c, Pattern::White);
+        let measured = measured_target(
+            &loaded.scene,
+            &camera,
+            &projector,
+            &loaded.part_instances,
+            loaded.bin_instance,
+            &loaded.reference,
+            &radiance_map,
+            rendering,
+        )
+        .with_context(|| format!("view {im_id} ({})", view.stack_dir.display()))?;
+        let mut target = FitTarget::default();
+        for (&(u, v), &r) in measured.target.pixels.iter().zip(&measured.target.radiance) {
+            if u % step == 0 && v % step == 0 {
+                target.pixels.push((u, v));
+                target.radiance.push(r);
+            }
+        }
+        fit_views.push(FitView {
+            camera,
+            projector,
+            target,
+        });
+        measured_views.push(measured);
+    }
+    Ok((fit_views, measured_views))
+}
+
+fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
+    let loaded = calibrate_scene::load(&args.scene)?;
+    check_views(&loaded, &args.views)?;
+    let table = ResponseTable::load(&args.response)?;
+    let rendering = rendering_of(args.transport, args.spp, 1);
+    let step = args.pixel_step;
+    let (views, measured_views) = fit_views(&loaded, &table, &args.views, &rendering, step)?;
+
+    let loss = match args.loss {
+        LossArg::L2 => Loss::L2,
+        LossArg::Ln => {
+            // ε: 1 % of the mean target radiance (relative errors count above it).
+            let (sum, n) = views.iter().flat_map(|v| &v.target.radiance).fold(
+                (0.0f64, 0usize),
+                |(s, n), &r| {
+                    if r.is_finite() {
+                        (s + r as f64, n + 1)
+                    } else {
+                        (s, n)
+                    }
+                },
+            );
+            Loss::LnRadiance {
+                floor: (0.01 * sum / n.max(1) as f64) as f32,
+            }
+        }
+        LossArg::Huber => {
+            // δ: the 90th percentile of the target radiance.
+            let mut all: Vec<f32> = views
+                .iter()
+                .flat_map(|v| v.target.radiance.iter().copied())
+                .filter(|r| r.is_finite())
+                .collect();
+            all.sort_by(f32::total_cmp);
+            Loss::Huber {
+                delta: all.get(all.len() * 9 / 10).copied().unwrap_or(1.0),
+            }
+        }
+    };
     let problem = FitProblem {
         scene: &loaded.scene,
-        camera,
-        projector: &projector,
-        instance: PART_INSTANCE,
-        target: &target,
+        views: &views,
+        instances: &loaded.part_instances,
         rendering,
+        residual: args.residual,
+        loss,
+        block_px: args.block_px,
     };
     let config = FitConfig {
         iterations: args.iterations,
+        reseed: args.reseed,
         ..FitConfig::default()
     };
     let bar = crate::progress::bar(args.iterations as u64, "BSDF fit");
     let result = problem.fit_with_progress(&config, |_, _| bar.inc(1))?;
     bar.finish_and_clear();
 
+    let label = format!("obj {}", loaded.obj_id);
+    let per_view: Vec<_> = args
+        .views
+        .iter()
+        .zip(&measured_views)
+        .zip(&views)
+        .map(|((im_id, m), v)| {
+            serde_json::json!({
+                "im_id": im_id,
+                "pixels": v.target.pixels.len(),
+                "unmeasured_pixels": m.unmeasured_pixels,
+                "radiometric_scale": m.scale,
+                "reference_pixels": m.reference_pixels,
+            })
+        })
+        .collect();
     let json = serde_json::json!({
         "format": MATERIAL_FORMAT,
-        "part": loaded.file.part,
+        "scene": loaded.scene_dir,
+        "obj_id": loaded.obj_id,
+        "views": args.views,
         "params": params_to_map(&result.params),
         "free": FREE_NAMES,
         "transport": format!("{:?}", args.transport),
         "samples_per_pixel": rendering.samples_per_pixel,
+        "residual": format!("{:?}", args.residual),
+        "loss": format!("{loss:?}"),
+        "block_px": args.block_px,
+        "reseed": args.reseed,
+        "pixel_step": step,
         "pixels": result.pixels,
-        "unmeasured_pixels": measured.unmeasured_pixels,
-        "radiometric_scale": measured.scale,
-        "reference_pixels": measured.reference_pixels,
+        "per_view": per_view,
         "elapsed_s": result.elapsed_s,
         "loss": result.loss,
         "trajectory": result.trajectory,
     });
-    write_file_atomically(&args.out, &serde_json::to_vec_pretty(&json)?)?;
+    // Plots first, the material last: a material file on disk means the run completed.
     let history = stem_with(&args.out, "history.png");
-    write_file_atomically(
-        &history,
-        &fit_history_png(&result, &loaded.file.part, None)?,
-    )?;
+    write_file_atomically(&history, &fit_history_png(&result, &label, None)?)?;
     let rendered = problem.render(&result.params);
     let error = stem_with(&args.out, "error.png");
-    let k = &camera.intrinsics;
+    let k = &views[0].camera.intrinsics;
     write_file_atomically(
         &error,
         &error_map_png(
             k.width_px,
             k.height_px,
-            &target.pixels,
-            &rendered,
-            &target.radiance,
+            &views[0].target.pixels,
+            &rendered[0],
+            &views[0].target.radiance,
             0.25,
         )?,
     )?;
-    let p = &result.params;
+    write_file_atomically(&args.out, &serde_json::to_vec_pretty(&json)?)?;
     println!(
-        "bsdf: {} — {} object pixels ({} unmeasured: saturated or black in every exposure), scale from {} reference pixels",
-        loaded.file.part, result.pixels, measured.unmeasured_pixels, measured.reference_pixels
+        "bsdf: {} — {} part instances, views {:?}: {} object pixels in the loss",
+        loaded.scene_dir.display(),
+        loaded.part_instances.len(),
+        args.views,
+        result.pixels,
     );
+    for (im_id, m) in args.views.iter().zip(&measured_views) {
+        println!(
+            "  view {im_id}: {} unmeasured pixels (saturated or black in every exposure), scale {:.4e} from {} reference pixels",
+            m.unmeasured_pixels, m.scale, m.reference_pixels
+        );
+    }
+    let p = &result.params;
     println!(
         "  base_color {:.3}, metallic {:.3}, roughness {:.3}, specular {:.3}; loss {:.4} → {:.4} in {} iterations, {:.2} s → {}",
         p.base_color,
@@ -422,18 +502,19 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
 /// What [`part_radiance`] returns: image size, the part's pixels, their radiance per material.
 type PartRadiance = (u32, u32, Vec<(u32, u32)>, [Vec<f32>; 2]);
 
-/// The part's interior pixels (3 × 3 all part) seen from `t_w_c`, and their radiance with each
-/// of `materials` (rendered alike with `rendering`).
+/// The part's interior pixels (3 × 3 all part instances) seen from `t_w_c`, and their radiance
+/// with each of `materials` on every part instance (rendered alike with `rendering`).
 fn part_radiance(
-    loaded: &LoadedScene,
+    loaded: &CalibrationScene,
     t_w_c: &nalgebra::Isometry3<f64>,
-    materials: [&glint_render::bsdf::PrincipledParams<f32>; 2],
+    materials: [&PrincipledParams<f32>; 2],
     rendering: &PixelRendering,
 ) -> PartRadiance {
     let [camera, _] = loaded.rig.cameras(t_w_c);
     let projector = loaded.rig.projector(t_w_c, Pattern::White);
     let (w, h) = (camera.intrinsics.width_px, camera.intrinsics.height_px);
-    let shade = |u, v, m: &glint_render::bsdf::PrincipledParams<f32>, r: &PixelRendering| {
+    let is_part_instance = |i: u32| loaded.part_instances.contains(&i);
+    let shade = |u, v, m: &PrincipledParams<f32>, r: &PixelRendering| {
         path_pixel(
             &loaded.scene,
             &camera,
@@ -444,7 +525,7 @@ fn part_radiance(
             r.samples_per_pixel,
             r.seed,
             |i| {
-                if i == PART_INSTANCE {
+                if is_part_instance(i) {
                     *m
                 } else {
                     *loaded.scene.material_of(i)
@@ -452,14 +533,18 @@ fn part_radiance(
             },
         )
     };
-    let is_part = |u: u32, v: u32| {
-        shade(u, v, materials[0], &PixelRendering::SINGLE_PATH)
-            .is_some_and(|s| s.instance == PART_INSTANCE)
-    };
+    let first_hits: Vec<bool> = (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            shade(i % w, i / w, materials[0], &PixelRendering::SINGLE_PATH)
+                .is_some_and(|s| is_part_instance(s.instance))
+        })
+        .collect();
+    let is_part = |u: u32, v: u32| first_hits[(v * w + u) as usize];
     let mut pixels = Vec::new();
     for v in 1..h - 1 {
         for u in 1..w - 1 {
-            if is_part(u, v) && (v - 1..=v + 1).all(|y| (u - 1..=u + 1).all(|x| is_part(x, y))) {
+            if (v - 1..=v + 1).all(|y| (u - 1..=u + 1).all(|x| is_part(x, y))) {
                 pixels.push((u, v));
             }
         }
@@ -486,28 +571,89 @@ fn relative_rms(a: &[f32], b: &[f32]) -> f64 {
     (se / norm.max(f64::MIN_POSITIVE)).sqrt()
 }
 
-fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
-    let loaded = load_scene(&args.scene)?;
-    let read_map = |path: &Path, field: &str| -> anyhow::Result<_> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let value: serde_json::Value =
-            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
-        let map = value.get(field).unwrap_or(&value).clone();
-        let map: std::collections::BTreeMap<String, f32> = serde_json::from_value(map)
-            .with_context(|| format!("{}: not a parameter map", path.display()))?;
-        params_from_map(&map, &path.display().to_string()).map_err(anyhow::Error::msg)
+/// Reads a JSON file.
+fn read_json(path: &Path) -> anyhow::Result<serde_json::Value> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
+}
+
+/// Principled parameters in `value`: a name → value map, or one under `params`, or the
+/// capture's `gt_materials.json` (`part_material` in the order of `parameter_names`).
+fn params_in(value: &serde_json::Value, path: &Path) -> anyhow::Result<PrincipledParams<f32>> {
+    let where_ = path.display().to_string();
+    let map: std::collections::BTreeMap<String, f32> = if let (Some(values), Some(names)) =
+        (value.get("part_material"), value.get("parameter_names"))
+    {
+        let values: Vec<f32> = serde_json::from_value(values.clone())
+            .with_context(|| format!("{where_}: part_material is not a list of numbers"))?;
+        let names: Vec<String> = serde_json::from_value(names.clone())
+            .with_context(|| format!("{where_}: parameter_names is not a list of names"))?;
+        if names.len() != values.len() {
+            anyhow::bail!(
+                "{where_}: {} parameter_names but {} part_material values",
+                names.len(),
+                values.len()
+            );
+        }
+        names.into_iter().zip(values).collect()
+    } else {
+        let map = value.get("params").unwrap_or(value).clone();
+        serde_json::from_value(map).with_context(|| format!("{where_}: not a parameter map"))?
     };
-    let fitted = read_map(&args.material, "params")?;
-    let truth = read_map(&args.gt_material, "params")?;
+    params_from_map(&map, &where_).map_err(anyhow::Error::msg)
+}
+
+fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
+    let loaded = calibrate_scene::load(&args.scene)?;
+    let material_json = read_json(&args.material)?;
+    let fitted = params_in(&material_json, &args.material)?;
+    let fitted_views: Vec<u32> = material_json
+        .get("views")
+        .map(|v| serde_json::from_value(v.clone()))
+        .transpose()
+        .with_context(|| {
+            format!(
+                "{}: views is not a list of image ids",
+                args.material.display()
+            )
+        })?
+        .unwrap_or_default();
+    let gt_path = args
+        .gt_material
+        .clone()
+        .unwrap_or_else(|| loaded.scene_dir.join("glint").join("gt_materials.json"));
+    let gt_json = read_json(&gt_path)?;
+    let truth = params_in(&gt_json, &gt_path)?;
+    let held_out = match args.held_out_view {
+        Some(im_id) => im_id,
+        None => loaded
+            .views
+            .iter()
+            .map(|v| v.im_id)
+            .find(|im_id| !fitted_views.contains(im_id))
+            .with_context(|| {
+                format!(
+                    "{}: every view ({:?}) was used by the fit; capture more views or give --held-out-view",
+                    loaded.scene_dir.display(),
+                    fitted_views
+                )
+            })?,
+    };
+    let mut evaluated: Vec<(String, u32)> = fitted_views
+        .iter()
+        .map(|&im_id| (format!("fitted view {im_id}"), im_id))
+        .collect();
+    evaluated.push((format!("held-out view {held_out}"), held_out));
     let mut errors = Vec::new();
-    for (name, t_w_c) in [
-        ("fitted view", loaded.t_w_c),
-        ("held-out view", loaded.held_out_t_w_c),
-    ] {
-        let rendering = rendering_of(args.transport, args.spp, 7);
+    let rendering = rendering_of(args.transport, args.spp, 7);
+    for (name, im_id) in &evaluated {
+        let view = loaded.view(*im_id)?;
         let (w, h, pixels, [fit, gt]) =
-            part_radiance(&loaded, &t_w_c, [&fitted, &truth], &rendering);
+            part_radiance(&loaded, &view.t_w_c, [&fitted, &truth], &rendering);
+        if pixels.is_empty() {
+            anyhow::bail!("{name}: no part pixels to compare");
+        }
         let err = relative_rms(&fit, &gt);
         errors.push(err);
         println!(
@@ -515,15 +661,41 @@ fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
             pixels.len(),
             err
         );
-        if name == "held-out view"
+        if *im_id == held_out
             && let Some(path) = &args.error_map
         {
             write_file_atomically(path, &error_map_png(w, h, &pixels, &fit, &gt, 0.25)?)?;
         }
     }
+    if let Some(response) = &args.response {
+        let table = ResponseTable::load(response)?;
+        let (views, _) = fit_views(&loaded, &table, &fitted_views, &rendering, 1)?;
+        let problem = FitProblem {
+            scene: &loaded.scene,
+            views: &views,
+            instances: &loaded.part_instances,
+            rendering,
+            residual: Residual::SameSamples,
+            loss: Loss::L2,
+            block_px: 1,
+        };
+        let [loss_fitted, loss_truth] =
+            [&fitted, &truth].map(|m| problem.loss_and_gradient(m, free_of(m)).0);
+        println!(
+            "  L2 loss against the measured radiance of views {fitted_views:?}: fitted {loss_fitted:.4}, true material {loss_truth:.4}"
+        );
+    }
+    let part = gt_json
+        .get("part")
+        .and_then(|p| p.as_str())
+        .map_or_else(|| format!("obj {}", loaded.obj_id), str::to_owned);
+    let fitted_mean = if errors.len() > 1 {
+        errors[..errors.len() - 1].iter().sum::<f64>() / (errors.len() - 1) as f64
+    } else {
+        f64::NAN
+    };
     println!(
-        "| {} | {:.2} / {:.2} / {:.2} / {:.2} | {:.3} / {:.3} / {:.3} / {:.3} | {:.4} | {:.4} |",
-        loaded.file.part,
+        "| {part} | {:.2} / {:.2} / {:.2} / {:.2} | {:.3} / {:.3} / {:.3} / {:.3} | {:.4} | {:.4} |",
         truth.base_color,
         truth.metallic,
         truth.roughness,
@@ -532,8 +704,8 @@ fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
         fitted.metallic,
         fitted.roughness,
         fitted.specular,
-        errors[0],
-        errors[1]
+        fitted_mean,
+        errors[errors.len() - 1]
     );
     Ok(())
 }

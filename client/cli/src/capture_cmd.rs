@@ -12,6 +12,7 @@ use glint_camera::capture::{
 use glint_camera::dataset::bop::{
     BopCamera, BopGt, BopGtInfo, BopSceneWriter, MaskKind, write_dataset_camera, write_models,
 };
+use glint_camera::dataset::reference_file::{ReferenceSurface, write_reference_surface_json};
 use glint_camera::dataset::rig_file::{write_gt_sensor_json, write_rig_json};
 use glint_camera::dataset::{PatternImage, StereoSide, write_exposure_stack};
 use glint_camera::edge_errors::{EdgeBin, errors_by_edge_distance};
@@ -185,6 +186,14 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(layout.glint_dir())
         .with_context(|| format!("creating {}", layout.glint_dir().display()))?;
     write_rig_json(&layout.rig_json(), &rig)?;
+    // The bin as known equipment: the BSDF calibration's radiometric reference.
+    write_reference_surface_json(
+        &layout.reference_surface_json(),
+        &ReferenceSurface {
+            bin,
+            material: materials::bin(),
+        },
+    )?;
     write_gt_sensor_json(&layout.gt_sensor_json(), &cameras[0].1.config.sensor)?;
     write_dataset_camera(
         &args.out.join("camera.json"),
@@ -562,6 +571,7 @@ fn run_exposure_stacks(
     bar.finish_and_clear();
     report += "\nFiles: `test/000001/glint/exposure_stack/XXXXXX/stack.json` with `dt_NNN.png` (the sensor's digital numbers), \
                `gt_left_radiance.exr` beside it and `glint/gt_sensor.json` (ground truth, evaluation only), `glint/rig.json` (the rig as known hardware), \
+               `glint/reference_surface.json` (the bin and its known reflectance, the BSDF fit's radiometric reference), \
                and the BOP files of each view (scene_camera, scene_gt, scene_gt_info, mask, mask_visib).\n";
     bop.finish()?;
     let path = args.out.join("report.md");

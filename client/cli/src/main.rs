@@ -4,6 +4,7 @@
 
 mod bench;
 mod calibrate_cmd;
+mod calibrate_scene;
 mod capture_cmd;
 mod demo;
 mod eval;

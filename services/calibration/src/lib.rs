@@ -2,10 +2,10 @@
 //! - [`response`]: the camera response g (eq 12–13) by Debevec–Malik from an exposure stack,
 //!   and radiance maps E = g⁻¹(I)/Δt;
 //! - [`bsdf_fit`]: principled-BSDF parameters by differentiable rendering (dual numbers
-//!   through the renderer's own single-path shading), L2 loss, Adam;
-//! - the calibration scene file ([`scene_file`]) and plots as PNG ([`plot`]).
+//!   through the renderer's own single- or multi-path tracing), L2 loss, Adam;
+//! - principled parameters as name → value maps ([`material_map`]) and plots as PNG ([`plot`]).
 
 pub mod bsdf_fit;
+pub mod material_map;
 pub mod plot;
 pub mod response;
-pub mod scene_file;

@@ -134,6 +134,7 @@ pub fn render(
                         settings.transport,
                         &mut rng,
                         &|i| *scene.material_of(i),
+                        None,
                     );
                     rays += path.rays;
                     sum += path.radiance;
@@ -321,6 +322,64 @@ pub fn path_pixel<T: BsdfScalar>(
     seed: u64,
     material: impl Fn(u32) -> PrincipledParams<T>,
 ) -> Option<SinglePathSample<T>> {
+    path_pixel_sampled(
+        scene,
+        camera,
+        projector,
+        (u, v),
+        transport,
+        samples_per_pixel,
+        seed,
+        material,
+        None,
+    )
+}
+
+/// [`path_pixel`] with the sampling frozen: every random decision of the path (BSDF lobe and
+/// direction, Russian roulette) is made with `sampling(instance)`, while the hits are shaded
+/// with `material(instance)` (throughput f(material)·cos / pdf(sampling)). For the same seed
+/// and `sampling`, the paths are then identical whatever `material` is, so the estimate is a
+/// smooth function of `material` whose derivative is exactly what dual-number materials with
+/// real part `sampling` compute: the basis of a finite-difference check of the multi-path
+/// gradient. With `sampling = material` this is [`path_pixel`] (up to f32 rounding).
+#[allow(clippy::too_many_arguments)]
+pub fn path_pixel_frozen_sampling<T: BsdfScalar>(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    u: u32,
+    v: u32,
+    transport: LightTransport,
+    samples_per_pixel: u32,
+    seed: u64,
+    material: impl Fn(u32) -> PrincipledParams<T>,
+    sampling: impl Fn(u32) -> PrincipledParams<f32>,
+) -> Option<SinglePathSample<T>> {
+    path_pixel_sampled(
+        scene,
+        camera,
+        projector,
+        (u, v),
+        transport,
+        samples_per_pixel,
+        seed,
+        material,
+        Some(&sampling as &dyn Fn(u32) -> PrincipledParams<f32>),
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn path_pixel_sampled<T: BsdfScalar>(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    (u, v): (u32, u32),
+    transport: LightTransport,
+    samples_per_pixel: u32,
+    seed: u64,
+    material: impl Fn(u32) -> PrincipledParams<T>,
+    sampling: Option<&dyn Fn(u32) -> PrincipledParams<f32>>,
+) -> Option<SinglePathSample<T>> {
     let (rotation, origin) = camera.rotation_and_origin();
     let pixel = v as u64 * camera.intrinsics.width_px as u64 + u as u64;
     let mut rng = rand_pcg::Pcg32::seed_from_u64(seed ^ pixel.wrapping_mul(0x9E37_79B9_7F4A_7C15));
@@ -336,7 +395,7 @@ pub fn path_pixel<T: BsdfScalar>(
         let (d_c, direction) =
             camera_ray(&camera.intrinsics, &rotation, u as f32 + ju, v as f32 + jv);
         let path = trace(
-            scene, projector, origin, direction, transport, &mut rng, &material,
+            scene, projector, origin, direction, transport, &mut rng, &material, sampling,
         );
         if s == 0 {
             centre = path.first_hit.map(|(t, instance)| (t * d_c.z, instance));
@@ -359,6 +418,10 @@ pub fn path_pixel<T: BsdfScalar>(
 /// held constant, so with dual numbers the derivative of the estimate is an unbiased estimate of
 /// the radiance's derivative (the sampling density is detached, as in differentiable path
 /// tracers). With `f32` the throughput factor is the sample's own weight, as always.
+/// `sampling`, when given, replaces the real part of the material in every random decision
+/// (see [`path_pixel_frozen_sampling`]); Russian roulette always uses the sampling side's
+/// throughput, so it is detached like the density.
+#[allow(clippy::too_many_arguments)]
 fn trace<T: BsdfScalar>(
     scene: &Scene,
     projector: &Projector,
@@ -367,6 +430,7 @@ fn trace<T: BsdfScalar>(
     transport: LightTransport,
     rng: &mut impl Rng,
     material: &impl Fn(u32) -> PrincipledParams<T>,
+    sampling: Option<&dyn Fn(u32) -> PrincipledParams<f32>>,
 ) -> PathResult<T> {
     let (max_bounces, roulette_after) = match transport {
         LightTransport::SinglePath => (1, u32::MAX),
@@ -381,6 +445,9 @@ fn trace<T: BsdfScalar>(
         rays: 0,
     };
     let mut throughput = T::from(1.0);
+    // The throughput of the sampling material alone (equal to `throughput.re()` unless the
+    // sampling is frozen): what Russian roulette looks at.
+    let mut sampled_throughput = 1.0f32;
     let (mut origin, mut direction) = (origin, direction);
     for bounce in 0..max_bounces {
         result.rays += 1;
@@ -403,25 +470,28 @@ fn trace<T: BsdfScalar>(
         if bounce + 1 == max_bounces {
             break;
         }
+        let sampling_material = sampling.map_or_else(|| material.re(), |s| s(hit.instance));
         let Some(sample) = bsdf::sample(
-            &material.re(),
+            &sampling_material,
             towards_previous,
             rng.random(),
             [rng.random(), rng.random()],
         ) else {
             break;
         };
-        throughput *= if T::NDERIV == 0 {
+        throughput *= if T::NDERIV == 0 && sampling.is_none() {
             T::from(sample.weight)
         } else {
             bsdf::eval(&material, towards_previous, sample.wo) * sample.pdf.recip()
         };
+        sampled_throughput *= sample.weight;
         if bounce + 1 >= roulette_after {
-            let survive = throughput.re().min(0.95);
+            let survive = sampled_throughput.min(0.95);
             if survive <= 0.0 || rng.random::<f32>() >= survive {
                 break;
             }
             throughput *= survive.recip();
+            sampled_throughput *= survive.recip();
         }
         if !(throughput.re() > 0.0 && throughput.re().is_finite()) {
             break;

@@ -3,6 +3,7 @@
 mod metrics;
 mod refine_exp;
 mod scenes;
+pub(crate) use scenes::same_pose;
 mod uncertainty_exp;
 
 #[derive(clap::Subcommand)]

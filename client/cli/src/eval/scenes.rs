@@ -306,7 +306,7 @@ pub fn load_scene(
 }
 
 /// The same world pose up to file rounding (BOP stores mm with ~6 digits): 0.1 mm and 0.01 rad.
-fn same_pose(a: &Isometry3<f64>, b: &Isometry3<f64>) -> bool {
+pub(crate) fn same_pose(a: &Isometry3<f64>, b: &Isometry3<f64>) -> bool {
     (a.translation.vector - b.translation.vector).norm() < 1e-4
         && (a.rotation.inverse() * b.rotation).angle() < 1e-2
 }

@@ -1,6 +1,6 @@
 //! The principled-BSDF fit of §IV-B by differentiable rendering: with the projector, the
-//! camera and the object's pose known, find the BSDF parameters whose single-path render
-//! matches a target radiance map over the object's pixels.
+//! camera and the object's pose known, find the BSDF parameters whose render (single- or
+//! multi-path) matches target radiance maps over the object's pixels, in one or more views.
 //!
 //! - Renderer: [`glint_render::integrator::single_path_pixel`], the camera's own ray
 //!   generation, intersection and shading ([`glint_render::integrator::direct_light`]),
@@ -8,8 +8,12 @@
 //!   seeding that parameter's derivative): each pixel's radiance and its exact derivatives with
 //!   respect to the four free parameters. (num-dual's vector duals would do it in one pass, but
 //!   need its `nalgebra` feature, which pulls in a second nalgebra.)
-//! - Loss: normalised L2, L = Σ_p (r_p − t_p)² / Σ_p t_p² (scale-free, so one learning rate
-//!   suits any radiance unit), over the object pixels with a finite target.
+//! - Loss ([`Loss`]): normalised L2, L = Σ_p (r_p − t_p)² / Σ_p t_p² (scale-free, so one
+//!   learning rate suits any radiance unit), or the squared error of ln radiance, over the
+//!   object pixels with a finite target, all views pooled.
+//! - Multi-path: the same seed every iteration (common random numbers); the derivative holds
+//!   the sampling density and the lobe choices fixed (detached, as differentiable path tracers
+//!   do), which [`FitProblem::loss_with_frozen_sampling`] makes checkable by finite differences.
 //! - Optimiser: Adam (Kingma & Ba), every free parameter started at 0.5 as in the paper, each
 //!   step projected onto [0, 1] (the parameters' valid range).
 //! - Free parameters: base_color, metallic, roughness, specular; the others stay at
@@ -24,7 +28,7 @@ pub use target::{MeasuredTarget, TargetError, measured_target};
 use std::time::Instant;
 
 use glint_render::bsdf::PrincipledParams;
-use glint_render::integrator::{Camera, LightTransport, path_pixel};
+use glint_render::integrator::{Camera, LightTransport, path_pixel, path_pixel_frozen_sampling};
 use glint_render::projector::Projector;
 use glint_render::scene::Scene;
 use num_dual::Dual32;
@@ -38,12 +42,16 @@ pub const FREE: usize = 4;
 /// Why a fit could not run.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum FitError {
-    #[error("the target has {pixels} pixels but {values} radiance values")]
-    LengthMismatch { pixels: usize, values: usize },
+    #[error("view {view}: the target has {pixels} pixels but {values} radiance values")]
+    LengthMismatch {
+        view: usize,
+        pixels: usize,
+        values: usize,
+    },
     #[error(
-        "none of the {pixels} target pixels sees instance {instance} with a finite, non-zero target"
+        "none of the {pixels} target pixels sees instances {instances:?} with a finite, non-zero target"
     )]
-    NoPixels { pixels: usize, instance: u32 },
+    NoPixels { pixels: usize, instances: Vec<u32> },
     #[error("instance {instance} is not in the scene ({instances} instances)")]
     NoSuchInstance { instance: u32, instances: usize },
     #[error("{0}")]
@@ -55,6 +63,14 @@ pub enum FitError {
 pub struct FitTarget {
     pub pixels: Vec<(u32, u32)>,
     pub radiance: Vec<f32>,
+}
+
+/// One view of the fit: the left camera, the projector as it was for that view, and the target.
+#[derive(Clone, Debug)]
+pub struct FitView {
+    pub camera: Camera,
+    pub projector: Projector,
+    pub target: FitTarget,
 }
 
 /// Adam settings and the fixed parameters.
@@ -70,7 +86,15 @@ pub struct FitConfig {
     pub start: f32,
     /// Values of the parameters that are not free.
     pub fixed: PrincipledParams<f32>,
+    /// Fresh random numbers every iteration (seed + k·[`RESEED_STRIDE`]): stochastic gradient
+    /// descent, whose Adam averages the Monte Carlo noise of the gradient over iterations.
+    /// Without it every iteration reuses the same samples (common random numbers): a
+    /// deterministic loss, but one whose noise the optimiser can fit.
+    pub reseed: bool,
 }
+
+/// Seed step between iterations with [`FitConfig::reseed`].
+pub const RESEED_STRIDE: u64 = 0x9E37_79B9;
 
 impl Default for FitConfig {
     fn default() -> Self {
@@ -82,6 +106,7 @@ impl Default for FitConfig {
             beta2: 0.999,
             start: 0.5,
             fixed: PrincipledParams::new(0.5, 0.5, 0.5, 0.5).expect("constants are valid"),
+            reseed: false,
         }
     }
 }
@@ -96,27 +121,90 @@ pub struct FitResult {
     pub loss: Vec<f64>,
     /// Free parameters before each step and after the last.
     pub trajectory: Vec<[f32; FREE]>,
-    /// Pixels that entered the loss.
+    /// Pixels that entered the loss, all views.
     pub pixels: usize,
     /// Wall time of the fit, seconds.
     pub elapsed_s: f64,
 }
 
-/// What the fit renders: the scene (other instances keep their own, known materials), camera,
-/// projector, the instance being fitted, and how pixels are rendered.
+/// What the fit renders: the scene (other instances keep their own, known materials), the
+/// views with their targets, the instances whose (shared) material is fitted — every copy of
+/// the part in a bin has the same material — and how pixels are rendered. The loss sums over
+/// all views (one normalisation, so each pixel weighs the same whichever view it is in).
 pub struct FitProblem<'a> {
     pub scene: &'a Scene,
-    pub camera: Camera,
-    pub projector: &'a Projector,
-    /// Scene index of the instance whose material is fitted.
-    pub instance: u32,
-    pub target: &'a FitTarget,
+    pub views: &'a [FitView],
+    /// Scene indices of the instances whose material is fitted.
+    pub instances: &'a [u32],
     pub rendering: PixelRendering,
+    /// How the gradient's residual is estimated (matters with multi-path only).
+    pub residual: Residual,
+    pub loss: Loss,
+    /// Side of the square pixel blocks the loss compares, pixels: 1 compares pixels; b > 1
+    /// compares each b × b block's mean radiance (rendered against measured, over the block's
+    /// target pixels), which averages the Monte Carlo noise of both by the block's pixel
+    /// count, at the price of detail. Each block weighs by its pixel count.
+    pub block_px: u32,
 }
+
+/// The per-pixel loss ℓ(r, t) summed over the target pixels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Loss {
+    /// L = Σ (r − t)² / Σ t²: the paper's L2, scale-free. Bright glints dominate it.
+    L2,
+    /// L = Σ (ln(r + ε) − ln(t + ε))² / N, ε = `floor` (W·sr⁻¹·m⁻²): every pixel weighs
+    /// alike whatever its brightness, relative errors count.
+    LnRadiance { floor: f32 },
+    /// Huber: (r − t)² within ±δ, 2δ|r − t| − δ² beyond (δ = `delta`, W·sr⁻¹·m⁻²), over
+    /// Σ t²: L2 for ordinary pixels, a bounded slope for Monte Carlo fireflies (in the render
+    /// or the capture) that would otherwise dominate.
+    Huber { delta: f32 },
+}
+
+impl Loss {
+    /// (ℓ(r, t), ∂ℓ/∂r at r, this pixel's share of the normalisation).
+    fn pixel(self, r: f64, t: f64) -> (f64, f64, f64) {
+        match self {
+            Loss::L2 => ((r - t).powi(2), 2.0 * (r - t), t * t),
+            Loss::LnRadiance { floor } => {
+                let e = floor as f64;
+                let d = (r.max(0.0) + e).ln() - (t + e).ln();
+                (d * d, 2.0 * d / (r.max(0.0) + e), 1.0)
+            }
+            Loss::Huber { delta } => {
+                let (d, delta) = (r - t, delta as f64);
+                if d.abs() <= delta {
+                    (d * d, 2.0 * d, t * t)
+                } else {
+                    (
+                        2.0 * delta * d.abs() - delta * delta,
+                        2.0 * delta * d.signum(),
+                        t * t,
+                    )
+                }
+            }
+        }
+    }
+}
+
+/// The residual r̂ − t in the gradient 2 Σ (r̂ − t) ∂r̂ of a Monte Carlo render r̂.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Residual {
+    /// From the same samples as ∂r̂. E[(r̂ − t)²] = (r − t)² + Var r̂, so the gradient is that
+    /// of the loss plus ∂Var r̂: a bias towards parameters whose renders are less noisy.
+    SameSamples,
+    /// From a second, independent estimate r̂' (seed + [`DECORRELATED_SEED_OFFSET`]):
+    /// E[2 (r̂' − t) ∂r̂] = ∂(r − t)², unbiased, for one more f32 render per pixel.
+    Decorrelated,
+}
+
+/// Seed offset of the independent residual estimate of [`Residual::Decorrelated`].
+pub const DECORRELATED_SEED_OFFSET: u64 = 0x5DEE_CE66;
 
 /// How the fit renders a pixel ([`glint_render::integrator::path_pixel`]). With multi-path,
 /// the same seed every iteration gives common random numbers: the loss is a deterministic
-/// function of the parameters apart from lobe-selection jumps.
+/// function of the parameters apart from lobe-selection jumps. View k renders with
+/// `seed + k`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PixelRendering {
     pub transport: LightTransport,
@@ -149,63 +237,149 @@ pub fn free_of<T: Copy>(p: &PrincipledParams<T>) -> [T; FREE] {
     [p.base_color, p.metallic, p.roughness, p.specular]
 }
 
+/// A target pixel in the loss: view index, pixel (u, v), target radiance.
+type LossPixel = (usize, (u32, u32), f32);
+
+/// Sums of a loss pass: loss, its gradient, normalisation, pixels.
+type Sums = (f64, [f64; FREE], f64, usize);
+
+fn add_sums(a: Sums, b: Sums) -> Sums {
+    (
+        a.0 + b.0,
+        std::array::from_fn(|i| a.1[i] + b.1[i]),
+        a.2 + b.2,
+        a.3 + b.3,
+    )
+}
+
 impl FitProblem<'_> {
     fn check(&self) -> Result<(), FitError> {
-        let t = self.target;
-        if t.pixels.len() != t.radiance.len() {
-            return Err(FitError::LengthMismatch {
-                pixels: t.pixels.len(),
-                values: t.radiance.len(),
-            });
+        for (view, v) in self.views.iter().enumerate() {
+            let t = &v.target;
+            if t.pixels.len() != t.radiance.len() {
+                return Err(FitError::LengthMismatch {
+                    view,
+                    pixels: t.pixels.len(),
+                    values: t.radiance.len(),
+                });
+            }
         }
         let instances = self.scene.instances().len();
-        if self.instance as usize >= instances {
+        if let Some(&instance) = self.instances.iter().find(|&&i| i as usize >= instances) {
             return Err(FitError::NoSuchInstance {
-                instance: self.instance,
+                instance,
                 instances,
             });
         }
         Ok(())
     }
 
-    /// Pixel (u, v) rendered with `params` on the fitted instance (and the scene's materials
-    /// elsewhere); `None` unless its centre ray hits the fitted instance.
+    fn is_fitted(&self, instance: u32) -> bool {
+        self.instances.contains(&instance)
+    }
+
+    /// Pixel (u, v) of view `k` rendered with `params` on the fitted instances (and the
+    /// scene's materials elsewhere); `None` unless its centre ray hits a fitted instance.
+    /// With `sampling`, every random decision uses it instead of `params`' real part
+    /// ([`path_pixel_frozen_sampling`]).
     fn shade<T: glint_render::bsdf::BsdfScalar>(
         &self,
-        u: u32,
-        v: u32,
+        k: usize,
+        (u, v): (u32, u32),
         params: &PrincipledParams<T>,
+        sampling: Option<&PrincipledParams<f32>>,
+    ) -> Option<T> {
+        self.shade_seeded(k, (u, v), params, sampling, 0)
+    }
+
+    /// [`FitProblem::shade`] with the seed offset by `seed_offset`.
+    fn shade_seeded<T: glint_render::bsdf::BsdfScalar>(
+        &self,
+        k: usize,
+        (u, v): (u32, u32),
+        params: &PrincipledParams<T>,
+        sampling: Option<&PrincipledParams<f32>>,
+        seed_offset: u64,
     ) -> Option<T> {
         let r = &self.rendering;
+        let view = &self.views[k];
+        let seed = r.seed.wrapping_add(k as u64).wrapping_add(seed_offset);
         let material = |i: u32| {
-            if i == self.instance {
+            if self.is_fitted(i) {
                 *params
             } else {
                 self.scene.material_of(i).map(|x| T::from(x))
             }
         };
-        path_pixel(
-            self.scene,
-            &self.camera,
-            self.projector,
-            u,
-            v,
-            r.transport,
-            r.samples_per_pixel,
-            r.seed,
-            material,
-        )
-        .filter(|s| s.instance == self.instance)
-        .map(|s| s.radiance)
+        let sample = match sampling {
+            None => path_pixel(
+                self.scene,
+                &view.camera,
+                &view.projector,
+                u,
+                v,
+                r.transport,
+                r.samples_per_pixel,
+                seed,
+                material,
+            ),
+            Some(s) => path_pixel_frozen_sampling(
+                self.scene,
+                &view.camera,
+                &view.projector,
+                u,
+                v,
+                r.transport,
+                r.samples_per_pixel,
+                seed,
+                material,
+                |i| {
+                    if self.is_fitted(i) {
+                        *s
+                    } else {
+                        *self.scene.material_of(i)
+                    }
+                },
+            ),
+        };
+        sample
+            .filter(|s| self.is_fitted(s.instance))
+            .map(|s| s.radiance)
     }
 
-    /// The rendered radiance of every target pixel for `params` (NaN where the pixel does not
-    /// see the instance).
-    pub fn render(&self, params: &PrincipledParams<f32>) -> Vec<f32> {
-        self.target
-            .pixels
-            .par_iter()
-            .map(|&(u, v)| self.shade(u, v, params).unwrap_or(f32::NAN))
+    /// Every view's target pixels with a usable (finite, positive) target, grouped into the
+    /// loss's blocks ([`FitProblem::block_px`]).
+    fn loss_groups(&self) -> Vec<Vec<LossPixel>> {
+        let b = self.block_px.max(1);
+        let mut groups = Vec::new();
+        for (k, view) in self.views.iter().enumerate() {
+            let mut blocks: std::collections::BTreeMap<(u32, u32), Vec<_>> = Default::default();
+            for (&(u, v), &t) in view.target.pixels.iter().zip(&view.target.radiance) {
+                if t.is_finite() && t > 0.0 {
+                    blocks
+                        .entry((u / b, v / b))
+                        .or_default()
+                        .push((k, (u, v), t));
+                }
+            }
+            groups.extend(blocks.into_values());
+        }
+        groups
+    }
+
+    /// The rendered radiance of every view's target pixels for `params` (NaN where the pixel
+    /// does not see a fitted instance).
+    pub fn render(&self, params: &PrincipledParams<f32>) -> Vec<Vec<f32>> {
+        self.views
+            .iter()
+            .enumerate()
+            .map(|(k, view)| {
+                view.target
+                    .pixels
+                    .par_iter()
+                    .map(|&p| self.shade(k, p, params, None).unwrap_or(f32::NAN))
+                    .collect()
+            })
             .collect()
     }
 
@@ -227,43 +401,97 @@ impl FitProblem<'_> {
             });
             with_free(fixed.map(Dual32::from_re), lifted)
         });
+        let decorrelated = self.residual == Residual::Decorrelated
+            && self.rendering.transport != LightTransport::SinglePath;
+        let plain = with_free(*fixed, free);
         let zero = || (0.0f64, [0.0f64; FREE], 0.0f64, 0usize);
         let (sse, grad, norm, n) = self
-            .target
-            .pixels
+            .loss_groups()
             .par_iter()
-            .zip(&self.target.radiance)
-            .filter(|(_, t)| t.is_finite() && **t > 0.0)
-            .fold(
-                zero,
-                |(mut sse, mut grad, mut norm, mut n), (&(u, v), &t)| {
-                    if let Some(radiance) = self.shade(u, v, &seeded[0]) {
-                        let r = (radiance.re - t) as f64;
-                        sse += r * r;
-                        grad[0] += 2.0 * r * radiance.eps as f64;
-                        for (i, p) in seeded.iter().enumerate().skip(1) {
-                            // Same rays, same random numbers: only the seeded derivative differs.
-                            let d = self.shade(u, v, p).map_or(0.0, |s| s.eps);
-                            grad[i] += 2.0 * r * d as f64;
-                        }
-                        norm += (t as f64) * (t as f64);
-                        n += 1;
+            .fold(zero, |(mut sse, mut grad, mut norm, mut n), group| {
+                // Sums over the group's pixels that see a fitted instance.
+                let (mut r, mut r_other, mut t, mut d, mut m) = (0.0, 0.0, 0.0, [0.0; FREE], 0);
+                for &(k, p, tp) in group {
+                    let Some(radiance) = self.shade(k, p, &seeded[0], None) else {
+                        continue;
+                    };
+                    r += radiance.re as f64;
+                    d[0] += radiance.eps as f64;
+                    for (i, s) in seeded.iter().enumerate().skip(1) {
+                        // Same rays, same random numbers: only the seeded derivative differs.
+                        d[i] += self.shade(k, p, s, None).map_or(0.0, |s| s.eps) as f64;
                     }
-                    (sse, grad, norm, n)
-                },
-            )
-            .reduce(zero, |a, b| {
-                (
-                    a.0 + b.0,
-                    std::array::from_fn(|i| a.1[i] + b.1[i]),
-                    a.2 + b.2,
-                    a.3 + b.3,
-                )
-            });
+                    if decorrelated {
+                        let other = self.shade_seeded(k, p, &plain, None, DECORRELATED_SEED_OFFSET);
+                        r_other += other.unwrap_or(0.0) as f64;
+                    }
+                    t += tp as f64;
+                    m += 1;
+                }
+                if m > 0 {
+                    let mf = m as f64;
+                    let (value, mut slope, weight) = self.loss.pixel(r / mf, t / mf);
+                    if decorrelated {
+                        slope = self.loss.pixel(r_other / mf, t / mf).1;
+                    }
+                    // m·ℓ(r̄, t̄): its derivative is m·ℓ'·Σ∂r/m = ℓ'·Σ∂r.
+                    sse += mf * value;
+                    for (g, di) in grad.iter_mut().zip(d) {
+                        *g += slope * di;
+                    }
+                    norm += mf * weight;
+                    n += m;
+                }
+                (sse, grad, norm, n)
+            })
+            .reduce(zero, add_sums);
         if n == 0 || norm <= 0.0 {
             return (f64::NAN, [0.0; FREE], 0);
         }
         (sse / norm, grad.map(|g| g / norm), n)
+    }
+
+    /// The loss with the fitted material at `free` but every random decision of every path
+    /// made with the material at `sampled_at` (frozen sampling,
+    /// [`path_pixel_frozen_sampling`]): a smooth function of `free` for fixed `sampled_at`,
+    /// whose gradient at `free = sampled_at` is what [`FitProblem::loss_and_gradient`]
+    /// computes. For checking that gradient by finite differences.
+    pub fn loss_with_frozen_sampling(
+        &self,
+        fixed: &PrincipledParams<f32>,
+        free: [f32; FREE],
+        sampled_at: [f32; FREE],
+    ) -> f64 {
+        let params = with_free(*fixed, free);
+        let sampling = with_free(*fixed, sampled_at);
+        let zero = || (0.0f64, [0.0f64; FREE], 0.0f64, 0usize);
+        let (sse, _, norm, n) = self
+            .loss_groups()
+            .par_iter()
+            .fold(zero, |(mut sse, g, mut norm, mut n), group| {
+                let (mut r, mut t, mut m) = (0.0, 0.0, 0);
+                for &(k, p, tp) in group {
+                    if let Some(radiance) = self.shade(k, p, &params, Some(&sampling)) {
+                        r += radiance as f64;
+                        t += tp as f64;
+                        m += 1;
+                    }
+                }
+                if m > 0 {
+                    let mf = m as f64;
+                    let (value, _, weight) = self.loss.pixel(r / mf, t / mf);
+                    sse += mf * value;
+                    norm += mf * weight;
+                    n += m;
+                }
+                (sse, g, norm, n)
+            })
+            .reduce(zero, add_sums);
+        if n == 0 || norm <= 0.0 {
+            f64::NAN
+        } else {
+            sse / norm
+        }
     }
 
     /// Runs Adam from `config.start` (see the module doc).
@@ -301,11 +529,23 @@ impl FitProblem<'_> {
         let decay = (config.final_learning_rate / config.learning_rate) as f64;
         let mut pixels = 0;
         for k in 0..config.iterations {
-            let (l, g, n) = self.loss_and_gradient(&config.fixed, x);
+            let seed_offset = if config.reseed {
+                (k as u64).wrapping_mul(RESEED_STRIDE)
+            } else {
+                0
+            };
+            let this_step = FitProblem {
+                rendering: PixelRendering {
+                    seed: self.rendering.seed.wrapping_add(seed_offset),
+                    ..self.rendering
+                },
+                ..*self
+            };
+            let (l, g, n) = this_step.loss_and_gradient(&config.fixed, x);
             if n == 0 {
                 return Err(FitError::NoPixels {
-                    pixels: self.target.pixels.len(),
-                    instance: self.instance,
+                    pixels: self.views.iter().map(|v| v.target.pixels.len()).sum(),
+                    instances: self.instances.to_vec(),
                 });
             }
             pixels = n;

@@ -32,8 +32,8 @@ pub enum TargetError {
     NoReference(usize),
 }
 
-/// Object pixels (first hit `instance`, the whole 3 × 3 neighbourhood too: edge pixels mix the
-/// object and its background in a real camera) with a finite measurement, their radiance
+/// Object pixels (first hit one of `instances`, the whole 3 × 3 neighbourhood too: edge pixels
+/// mix the object and its background in a real camera) with a finite measurement, their radiance
 /// map value divided by the radiometric scale; the scale from every 4th pixel (in u and v)
 /// whose 3 × 3 neighbourhood is all `reference_instance`, rendered with `rendering` and the
 /// scene's materials (the reference's known one included), lit, and measured.
@@ -42,7 +42,7 @@ pub fn measured_target(
     scene: &Scene,
     camera: &Camera,
     projector: &Projector,
-    instance: u32,
+    instances: &[u32],
     reference_instance: u32,
     reference_material: &PrincipledParams<f32>,
     radiance_map: &Image<f32>,
@@ -85,18 +85,19 @@ pub fn measured_target(
         )
         .map_or(0.0, |s| s.radiance)
     };
-    let interior = |u: u32, v: u32, which: u32| {
+    let interior = |u: u32, v: u32, which: &dyn Fn(u32) -> bool| {
         (u >= 1 && v >= 1 && u + 1 < w && v + 1 < h)
-            && (v - 1..=v + 1)
-                .all(|y| (u - 1..=u + 1).all(|x| hits[(y * w + x) as usize].0 == which))
+            && (v - 1..=v + 1).all(|y| (u - 1..=u + 1).all(|x| which(hits[(y * w + x) as usize].0)))
     };
+    let is_reference = |i: u32| i == reference_instance;
+    let is_object = |i: u32| instances.contains(&i);
     let mut ratios: Vec<f64> = (0..h)
         .into_par_iter()
         .step_by(4)
         .flat_map_iter(|v| {
             (0..w).step_by(4).filter_map(move |u| {
                 let e = radiance_map.data()[(v * w + u) as usize];
-                if !(interior(u, v, reference_instance) && e.is_finite() && e > 0.0) {
+                if !(interior(u, v, &is_reference) && e.is_finite() && e > 0.0) {
                     return None;
                 }
                 let rendered = render_reference(u, v);
@@ -110,7 +111,7 @@ pub fn measured_target(
         for u in 0..w {
             let i = (v * w + u) as usize;
             let e = radiance_map.data()[i];
-            if interior(u, v, instance) {
+            if interior(u, v, &is_object) {
                 if e.is_finite() {
                     target.pixels.push((u, v));
                     target.radiance.push(e);

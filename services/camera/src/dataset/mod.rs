@@ -18,6 +18,7 @@ mod error;
 pub mod exposure_stack;
 mod image_files;
 mod json;
+pub mod reference_file;
 pub mod rig_file;
 pub mod robi;
 pub mod transforms;

@@ -162,6 +162,11 @@ impl BopSceneLayout {
     pub fn rig_json(&self) -> PathBuf {
         self.glint_dir().join("rig.json")
     }
+    /// `glint/reference_surface.json`: the bin and its known reflectance, the radiometric
+    /// reference of the BSDF calibration ([`crate::dataset::reference_file`]).
+    pub fn reference_surface_json(&self) -> PathBuf {
+        self.glint_dir().join("reference_surface.json")
+    }
     /// `glint/gt_sensor.json`: the simulator's sensor, for evaluation only.
     pub fn gt_sensor_json(&self) -> PathBuf {
         self.glint_dir().join("gt_sensor.json")
