@@ -126,10 +126,11 @@ pub struct RefineResult {
     /// `information⁻¹` (eq 18), or `None` when the information is rank-deficient — a part
     /// with a continuous symmetry, or too few constraints: some direction is unobservable.
     pub covariance: Option<Matrix6<f64>>,
-    /// Passes over all points (residual, Jacobian and weight of every point at one pose): the
-    /// initial one, one per gate stage, one per Levenberg–Marquardt trial step. The work of a
-    /// refinement is `points × point_passes` residual evaluations.
-    pub point_passes: usize,
+    /// Residual evaluations (residual, Jacobian and weight of one point at one pose), summed
+    /// over every pass: the initial one, one per gate stage, one per Levenberg–Marquardt trial
+    /// step, and the final one over all points when the last stage's normal equations came from
+    /// the coarse subset. The work of a refinement.
+    pub point_evaluations: usize,
 }
 
 /// Why a refinement could not run.
@@ -426,7 +427,7 @@ pub fn refine_sdf(
         }
     };
     let mut normal = accumulate(sdf, stage_points(0), &t_o_w, config, gates[0]);
-    let mut point_passes = 1;
+    let mut point_evaluations = stage_points(0).len();
     if normal.gated < config.min_inliers {
         return Err(RefineError::TooFewInliers {
             inliers: normal.gated,
@@ -445,7 +446,7 @@ pub fn refine_sdf(
         let points = stage_points(stage);
         if stage > 0 {
             let tighter = accumulate(sdf, points, &t_o_w, config, gate);
-            point_passes += 1;
+            point_evaluations += points.len();
             if tighter.gated < config.min_inliers {
                 break; // the tighter gate leaves too little: keep the previous stage's pose
             }
@@ -478,7 +479,7 @@ pub fn refine_sdf(
                 }
                 let candidate = se3::perturb_left(&step, &t_o_w);
                 let trial = accumulate(sdf, points, &candidate, config, gate);
-                point_passes += 1;
+                point_evaluations += points.len();
                 if trial.gated >= config.min_inliers && trial.cost <= normal.cost {
                     accepted = Some((step, candidate, trial));
                     break;
@@ -517,7 +518,7 @@ pub fn refine_sdf(
     if !normal_is_full {
         // The covariance and the reported cost are those of all points (eq 18, 19).
         normal = accumulate(sdf, points, &t_o_w, config, kept_gate);
-        point_passes += 1;
+        point_evaluations += points.len();
     }
     let inliers = normal.inliers;
     Ok(RefineResult {
@@ -533,7 +534,7 @@ pub fn refine_sdf(
         },
         information: normal.information,
         covariance: covariance_from_information(&normal.information),
-        point_passes,
+        point_evaluations,
     })
 }
 
@@ -702,6 +703,39 @@ mod tests {
         // Mean of 40 χ²₆ draws: 6 ± 3·√(12/40) = 6 ± 1.6 (3σ). The Huber kernel (k = 2) costs
         // a few % of efficiency, the grid bias adds ≲ 1; allow [4, 8.5].
         assert!((4.0..8.5).contains(&mean), "mean NEES {mean}");
+    }
+
+    #[test]
+    fn coarse_stages_save_work_and_end_at_the_same_minimum() {
+        let part = Part::EyeBolt;
+        let sdf = SdfGrid::build(&part.mesh(), &SdfConfig::default()).unwrap();
+        let t_w_o = pose([0.0, 0.0, 0.02], Vector3::new(1.0, 0.2, 0.1), 30.0);
+        let t_o_w_gt = t_w_o.inverse();
+        let mut points = Vec::new();
+        for (eye, seed) in [([0.0, 0.1, 0.5], 1), ([0.3, -0.2, 0.4], 2)] {
+            let eye = Point3::from(eye);
+            points.extend(scan(&sdf, part, &t_w_o, &eye, 3e-4, Noise::AlongRay, seed));
+        }
+        let initial = pose([0.004, -0.003, 0.005], Vector3::new(0.3, 1.0, -0.5), 5.0) * t_o_w_gt;
+        let coarse = SdfRefineConfig {
+            coarse_points: 1000,
+            ..SdfRefineConfig::default()
+        };
+        assert!(points.len() > 4 * coarse.coarse_points, "{}", points.len());
+        let fine = SdfRefineConfig {
+            coarse_points: usize::MAX,
+            ..coarse
+        };
+        let a = refine_sdf(&sdf, &points, &initial, &coarse).unwrap();
+        let b = refine_sdf(&sdf, &points, &initial, &fine).unwrap();
+        assert!(a.point_evaluations < b.point_evaluations, "{a:?} {b:?}");
+        // The last stage runs on all points in both, so the information is of all points.
+        assert!(a.inliers > coarse.coarse_points, "{a:?}");
+        // Each run stops within `step_sigma_tolerance` = 1σ of the same minimum, so they are
+        // within 2σ of each other under that minimum's information (Mahalanobis distance).
+        let delta = se3::log(&(a.t_o_w * b.t_o_w.inverse()));
+        let d2 = (delta.transpose() * b.information * delta)[(0, 0)];
+        assert!(d2 < 4.0, "Mahalanobis² {d2}: {a:?} {b:?}");
     }
 
     #[test]

@@ -120,8 +120,9 @@ struct Row {
     method: &'static str,
     threads: usize,
     iterations: usize,
-    /// Passes over all points (SDF: accumulate calls; ICP: iterations + the final inlier pass).
-    point_passes: usize,
+    /// Residual evaluations (SDF: every point of every pass, coarse passes on their subset;
+    /// ICP: points × (iterations + the final inlier pass)).
+    point_evaluations: usize,
     time_s: f64,
     initial: PoseError,
     error: PoseError,
@@ -133,9 +134,13 @@ impl Row {
     fn iteration_evals_per_s(&self) -> f64 {
         (self.points * self.iterations) as f64 / self.time_s
     }
-    /// points × passes / time: every residual the method computed.
+    /// Every residual the method computed, per second.
     fn point_evals_per_s(&self) -> f64 {
-        (self.points * self.point_passes) as f64 / self.time_s
+        self.point_evaluations as f64 / self.time_s
+    }
+    /// The work in passes over all points (fractional when coarse passes ran on a subset).
+    fn point_passes(&self) -> f64 {
+        self.point_evaluations as f64 / self.points as f64
     }
 }
 
@@ -222,7 +227,7 @@ pub fn run(args: &RefineBenchArgs) -> anyhow::Result<()> {
                           )|
                          -> anyhow::Result<()> {
                             let (times, result) = pool.install(|| time_runs(args.repeats, f))?;
-                            let (t_o_w, iterations, point_passes, status) = result;
+                            let (t_o_w, iterations, point_evaluations, status) = result;
                             rows.push(Row {
                                 part,
                                 points: problem.points.len(),
@@ -230,7 +235,7 @@ pub fn run(args: &RefineBenchArgs) -> anyhow::Result<()> {
                                 method,
                                 threads: *threads,
                                 iterations,
-                                point_passes,
+                                point_evaluations,
                                 time_s: median(times),
                                 initial,
                                 error: score(&t_o_w),
@@ -244,7 +249,7 @@ pub fn run(args: &RefineBenchArgs) -> anyhow::Result<()> {
                         Ok((
                             r.t_o_w,
                             r.iterations,
-                            r.point_passes,
+                            r.point_evaluations,
                             format!("{:?}", r.status).to_lowercase(),
                         ))
                     })?;
@@ -257,7 +262,8 @@ pub fn run(args: &RefineBenchArgs) -> anyhow::Result<()> {
                             } else {
                                 "max_iterations"
                             };
-                            Ok((r.t_o_w, r.iterations, r.iterations + 1, status.to_owned()))
+                            let evaluations = points_w.len() * (r.iterations + 1);
+                            Ok((r.t_o_w, r.iterations, evaluations, status.to_owned()))
                         })?;
                     }
                 }
@@ -455,14 +461,14 @@ fn print_table(rows: &[Row], args: &RefineBenchArgs, all_cores: usize) {
     println!("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---|");
     for r in rows {
         println!(
-            "| {} | {} | {} | {} | {} | {} | {} | {:.3} | {:.1} M | {:.1} M | {:.2} / {:.2} | {:.3} / {:.3} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {:.1} | {:.3} | {:.1} M | {:.1} M | {:.2} / {:.2} | {:.3} / {:.3} | {} |",
             r.part,
             r.points,
             r.views,
             r.method,
             r.threads,
             r.iterations,
-            r.point_passes,
+            r.point_passes(),
             r.time_s * 1e3,
             r.iteration_evals_per_s() / 1e6,
             r.point_evals_per_s() / 1e6,
@@ -482,14 +488,14 @@ fn write_csv(path: &Path, rows: &[Row], repeats: usize) -> anyhow::Result<()> {
     let mut text = format!("{CSV_HEADER}\n");
     for r in rows {
         text += &format!(
-            "{},{},{},{},{},{},{},{:.6},{repeats},{:.0},{:.0},{:.6},{:.6},{:.6},{:.6},{}\n",
+            "{},{},{},{},{},{},{:.2},{:.6},{repeats},{:.0},{:.0},{:.6},{:.6},{:.6},{:.6},{}\n",
             r.part.name(),
             r.points,
             r.views,
             r.method,
             r.threads,
             r.iterations,
-            r.point_passes,
+            r.point_passes(),
             r.time_s * 1e3,
             r.iteration_evals_per_s(),
             r.point_evals_per_s(),
@@ -566,7 +572,7 @@ fn export_problem(
             "method": r.method,
             "threads": r.threads,
             "iterations": r.iterations,
-            "point_passes": r.point_passes,
+            "point_passes": r.point_passes(),
             "time_s_median": r.time_s,
             "t_err_mm": r.error.translation_mm(),
             "r_err_deg": r.error.rotation_deg(),
