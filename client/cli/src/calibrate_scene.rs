@@ -25,7 +25,7 @@ use glint_camera::dataset::reference_file::read_reference_surface_json;
 use glint_camera::dataset::rig_file::read_rig_json;
 use glint_render::bsdf::PrincipledParams;
 use glint_render::rig::SliRig;
-use glint_render::scene::{Scene, SceneInstance};
+use glint_render::scene::Scene;
 use nalgebra::Isometry3;
 
 /// One view of the capture.
@@ -150,27 +150,13 @@ pub fn load(dir: &Path) -> anyhow::Result<CalibrationScene> {
         .with_context(|| format!("{}: no models folder above it", scene_dir.display()))?;
     let mesh = read_model(&models_dir, obj_id)?.mesh;
     let parts = t_w_os.len() as u32;
-    let mut instances: Vec<SceneInstance> = t_w_os
-        .iter()
-        .enumerate()
-        .map(|(i, t_w_o)| SceneInstance {
-            mesh: 0,
-            t_w_o: *t_w_o,
-            material: 0,
-            label: i as u16 + 1,
-        })
-        .collect();
-    instances.push(SceneInstance {
-        mesh: 1,
-        t_w_o: Isometry3::identity(),
-        material: 1,
-        label: glint_camera::bin::BIN_LABEL,
-    });
     // The part's material is a placeholder: the fit and the evaluation shade it with their own.
-    let scene = Scene::build(
-        &[mesh, reference.bin.mesh()],
-        instances,
-        vec![reference.material, reference.material],
+    let scene = glint_camera::bin::bin_scene_with_bin_material(
+        &mesh,
+        &t_w_os,
+        reference.material,
+        &reference.bin,
+        reference.material,
     )?;
     Ok(CalibrationScene {
         scene_dir,

@@ -94,6 +94,24 @@ pub fn bin_scene(
     part_material: glint_render::bsdf::PrincipledParams<f32>,
     bin: &BinSpec,
 ) -> Result<glint_render::scene::Scene, glint_render::scene::SceneError> {
+    bin_scene_with_bin_material(
+        part_mesh,
+        poses,
+        part_material,
+        bin,
+        crate::materials::bin(),
+    )
+}
+
+/// [`bin_scene`] with the bin in `bin_material` (e.g. a calibration's reference surface).
+/// Instances 0..N are the parts, N the bin.
+pub fn bin_scene_with_bin_material(
+    part_mesh: &TriMesh,
+    poses: &[Isometry3<f64>],
+    part_material: glint_render::bsdf::PrincipledParams<f32>,
+    bin: &BinSpec,
+    bin_material: glint_render::bsdf::PrincipledParams<f32>,
+) -> Result<glint_render::scene::Scene, glint_render::scene::SceneError> {
     use glint_render::scene::{Scene, SceneInstance};
     let mut instances: Vec<SceneInstance> = poses
         .iter()
@@ -114,7 +132,7 @@ pub fn bin_scene(
     Scene::build(
         &[part_mesh.clone(), bin.mesh()],
         instances,
-        vec![part_material, crate::materials::bin()],
+        vec![part_material, bin_material],
     )
 }
 
