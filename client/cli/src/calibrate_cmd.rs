@@ -201,9 +201,16 @@ pub fn run(command: CalibrateCommand) -> anyhow::Result<()> {
     }
 }
 
+/// The exposure stack in `dir` (the camera's folder format), validated for calibration.
+fn read_stack(dir: &Path) -> anyhow::Result<ExposureStack> {
+    let files = glint_camera::dataset::ExposureStackFiles::read(dir)?;
+    ExposureStack::new(files.images, files.exposures_s, files.bit_depth)
+        .with_context(|| format!("exposure stack {}", dir.display()))
+}
+
 fn response(args: &ResponseArgs) -> anyhow::Result<()> {
     let started = Instant::now();
-    let stack = ExposureStack::load(&args.stack)?;
+    let stack = read_stack(&args.stack)?;
     let config = DebevecConfig {
         lambda: args.lambda,
         samples: args.samples,
@@ -327,7 +334,7 @@ fn fit_views(
     let mut measured_views = Vec::with_capacity(views.len());
     for &im_id in views {
         let view = loaded.view(im_id)?;
-        let stack = ExposureStack::load(&view.stack_dir)?;
+        let stack = read_stack(&view.stack_dir)?;
         let radiance_map = table.radiance_map(&stack)?;
         let [camera, _] = loaded.rig.cameras(&view.t_w_c);
         let projector = loaded.rig.projector(&view.t_w_c, Pattern::White);

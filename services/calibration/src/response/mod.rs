@@ -7,7 +7,7 @@ mod stack;
 
 pub use debevec::{DebevecConfig, MAX_LEVELS, SamplePixel, SolveInfo, calibrate, select_samples};
 pub use plot::response_png;
-pub use stack::{ExposureStack, max_dn, stack_json};
+pub use stack::{ExposureStack, max_dn};
 
 use std::path::{Path, PathBuf};
 
