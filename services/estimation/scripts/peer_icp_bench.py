@@ -212,8 +212,11 @@ def main():
           "| Glint error (mm / °) | Open3D error (mm / °) | Glint at least as accurate (t, r) | goal |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     held = 0
+
+    def med(xs):
+        return float(np.median(xs))
+
     for (part, points, views), runs in sorted(groups.items()):
-        med = lambda xs: float(np.median(xs))  # noqa: E731
         speedup = med([r["speedup"] for r in runs])
         g_t, g_r = med([r["glint"][0] for r in runs]), med([r["glint"][1] for r in runs])
         o_t, o_r = med([r["open3d"][0] for r in runs]), med([r["open3d"][1] for r in runs])

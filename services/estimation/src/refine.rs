@@ -412,9 +412,13 @@ pub fn refine_sdf(
         gates.push((g * 0.5).max(config.final_gate_m));
     }
     let coarse: Vec<DepthPoint>;
-    let coarse_points = if gates.len() > 1 && points.len() > config.coarse_points.max(1) {
-        let stride = points.len().div_ceil(config.coarse_points.max(1));
-        coarse = points.iter().step_by(stride).copied().collect();
+    let coarse_cap = config.coarse_points.max(1);
+    let coarse_points = if gates.len() > 1 && points.len() > coarse_cap {
+        coarse = points
+            .iter()
+            .step_by(points.len().div_ceil(coarse_cap))
+            .copied()
+            .collect();
         &coarse[..]
     } else {
         points
@@ -438,21 +442,18 @@ pub fn refine_sdf(
     }
     let mut status = RefineStatus::MaxIterations;
     let mut iterations = 0;
-    // The gate of the stage whose pose is kept, and whether `normal` covers every point.
-    let mut kept_gate = gates[0];
-    let mut normal_is_full = stage_points(0).len() == points.len();
+    // The stage whose pose and normal equations are kept.
+    let mut kept_stage = 0;
     'stages: for (stage, &gate) in gates.iter().enumerate() {
-        let all_points = points;
-        let points = stage_points(stage);
+        let active = stage_points(stage);
         if stage > 0 {
-            let tighter = accumulate(sdf, points, &t_o_w, config, gate);
-            point_evaluations += points.len();
+            let tighter = accumulate(sdf, active, &t_o_w, config, gate);
+            point_evaluations += active.len();
             if tighter.gated < config.min_inliers {
                 break; // the tighter gate leaves too little: keep the previous stage's pose
             }
             normal = tighter;
-            kept_gate = gate;
-            normal_is_full = points.len() == all_points.len();
+            kept_stage = stage;
         }
         let budget = (config.max_iterations - iterations) / (gates.len() - stage);
         let mut lambda = 1e-4;
@@ -478,8 +479,8 @@ pub fn refine_sdf(
                     break; // not worth a pass over the points: a minimum
                 }
                 let candidate = se3::perturb_left(&step, &t_o_w);
-                let trial = accumulate(sdf, points, &candidate, config, gate);
-                point_evaluations += points.len();
+                let trial = accumulate(sdf, active, &candidate, config, gate);
+                point_evaluations += active.len();
                 if trial.gated >= config.min_inliers && trial.cost <= normal.cost {
                     accepted = Some((step, candidate, trial));
                     break;
@@ -515,9 +516,9 @@ pub fn refine_sdf(
             }
         }
     }
-    if !normal_is_full {
+    if stage_points(kept_stage).len() < points.len() {
         // The covariance and the reported cost are those of all points (eq 18, 19).
-        normal = accumulate(sdf, points, &t_o_w, config, kept_gate);
+        normal = accumulate(sdf, points, &t_o_w, config, gates[kept_stage]);
         point_evaluations += points.len();
     }
     let inliers = normal.inliers;
