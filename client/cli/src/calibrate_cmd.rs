@@ -62,10 +62,10 @@ pub struct BsdfArgs {
     #[arg(long, default_value = "multi", value_parser = parse_transport)]
     pub transport: LightTransport,
     /// Samples per pixel of multi-path renders.
-    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=256))]
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=256))]
     pub spp: u32,
     /// Use every N-th object pixel in u and v.
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=16))]
     pub pixel_step: u32,
     /// The gradient's residual with multi-path: `same` (the samples of the derivative) or
     /// `decorrelated` (an independent estimate: unbiased, one more render per pixel).
@@ -85,6 +85,19 @@ pub struct BsdfArgs {
     /// same samples throughout.
     #[arg(long)]
     pub reseed: bool,
+    /// Multi-path renders of the fit shade every vertex after the first as if at least this
+    /// rough (path-space regularisation): glossy-to-glossy inter-reflections of the point-like
+    /// projector are blurred, a bias, and lose the fireflies that otherwise swamp the loss on
+    /// shiny metals. 0 renders exactly as the camera does.
+    #[arg(long, default_value_t = 0.5, value_parser = parse_unit_interval)]
+    pub min_indirect_roughness: f32,
+}
+
+fn parse_unit_interval(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(x) if (0.0..=1.0).contains(&x) => Ok(x),
+        _ => Err(format!("{s:?} must be a number in [0, 1]")),
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -147,6 +160,10 @@ pub struct EvalBsdfArgs {
     pub transport: LightTransport,
     #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=256))]
     pub spp: u32,
+    /// Regularisation of the comparison renders, as `calibrate bsdf --min-indirect-roughness`
+    /// (0: exact).
+    #[arg(long, default_value_t = 0.0, value_parser = parse_unit_interval)]
+    pub min_indirect_roughness: f32,
     /// Optional: the response the fit used. Then the L2 loss against the measured radiance
     /// of the fitted views is printed for the fitted and the true material: a true material
     /// with the lower loss means the optimiser stopped short; with the higher loss, the
@@ -370,7 +387,11 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
     let loaded = calibrate_scene::load(&args.scene)?;
     check_views(&loaded, &args.views)?;
     let table = ResponseTable::load(&args.response)?;
-    let rendering = rendering_of(args.transport, args.spp, 1);
+    let rendering = rendering_of(
+        args.transport.regularised(args.min_indirect_roughness),
+        args.spp,
+        1,
+    );
     let step = args.pixel_step;
     let (views, measured_views) = fit_views(&loaded, &table, &args.views, &rendering, step)?;
 
@@ -446,7 +467,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         "views": args.views,
         "params": params_to_map(&result.params),
         "free": FREE_NAMES,
-        "transport": format!("{:?}", args.transport),
+        "transport": format!("{:?}", rendering.transport),
         "samples_per_pixel": rendering.samples_per_pixel,
         "residual": format!("{:?}", args.residual),
         "loss": format!("{loss:?}"),
@@ -578,6 +599,18 @@ fn relative_rms(a: &[f32], b: &[f32]) -> f64 {
     (se / norm.max(f64::MIN_POSITIVE)).sqrt()
 }
 
+/// The median of |ln(a / b)| over the pixels where both are positive (NaN if none): the
+/// typical pixel's relative error, which a few glints cannot dominate.
+fn median_abs_log_ratio(a: &[f32], b: &[f32]) -> f64 {
+    crate::median(
+        a.iter()
+            .zip(b)
+            .filter(|&(&x, &y)| x > 0.0 && y > 0.0)
+            .map(|(&x, &y)| (x as f64 / y as f64).ln().abs())
+            .collect(),
+    )
+}
+
 /// Reads a JSON file.
 fn read_json(path: &Path) -> anyhow::Result<serde_json::Value> {
     let text =
@@ -653,7 +686,11 @@ fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
         .collect();
     evaluated.push((format!("held-out view {held_out}"), held_out));
     let mut errors = Vec::new();
-    let rendering = rendering_of(args.transport, args.spp, 7);
+    let rendering = rendering_of(
+        args.transport.regularised(args.min_indirect_roughness),
+        args.spp,
+        7,
+    );
     for (name, im_id) in &evaluated {
         let view = loaded.view(*im_id)?;
         let (w, h, pixels, [fit, gt]) =
@@ -664,9 +701,10 @@ fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
         let err = relative_rms(&fit, &gt);
         errors.push(err);
         println!(
-            "  {name}: {} part pixels, relative RMS radiance error {:.4}",
+            "  {name}: {} part pixels, relative RMS radiance error {:.4}, median |ln(fitted / true)| {:.4}",
             pixels.len(),
-            err
+            err,
+            median_abs_log_ratio(&fit, &gt)
         );
         if *im_id == held_out
             && let Some(path) = &args.error_map

@@ -146,6 +146,7 @@ pub fn write(dir: &Path, export: &MitsubaExport) -> anyhow::Result<std::path::Pa
             LightTransport::MultiPath {
                 max_bounces,
                 roulette_after,
+                ..
             } => (max_bounces, Some(roulette_after)),
         };
         renders.push(json!({

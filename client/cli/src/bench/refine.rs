@@ -10,6 +10,7 @@
 //! truth moved by a seeded translation and rotation of fixed magnitude in random directions.
 //! The refiners never see the truth; it only scores their results.
 
+use crate::median;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -311,16 +312,6 @@ fn time_runs<T>(
         first.get_or_insert(result);
     }
     Ok((times, first.expect("repeats ≥ 1")))
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// A uniformly random rotation (normalised Gaussian quaternion).

@@ -15,7 +15,8 @@
 //!   the sampling density and the lobe choices fixed (detached, as differentiable path tracers
 //!   do), which [`FitProblem::loss_with_frozen_sampling`] makes checkable by finite differences.
 //! - Optimiser: Adam (Kingma & Ba), every free parameter started at 0.5 as in the paper, each
-//!   step projected onto [0, 1] (the parameters' valid range).
+//!   step projected onto the parameters' valid range: [0, 1], roughness [√α_min, 1]
+//!   ([`free_lower_bounds`]).
 //! - Free parameters: base_color, metallic, roughness, specular; the others stay at
 //!   [`FitConfig::fixed`] (default: their lobes off, as the mock camera's metals have them).
 
@@ -38,6 +39,14 @@ use rayon::prelude::*;
 pub const FREE_NAMES: [&str; FREE] = ["base_color", "metallic", "roughness", "specular"];
 /// Number of free parameters.
 pub const FREE: usize = 4;
+
+/// The lower end of each free parameter's range in the fit. Roughness stops at √α_min: below
+/// it the GGX width is floored ([`glint_render::bsdf::ggx::MIN_ALPHA`]), every roughness
+/// renders alike and the derivative is exactly 0, so a step into that range could never come
+/// back out.
+pub fn free_lower_bounds() -> [f32; FREE] {
+    [0.0, 0.0, glint_render::bsdf::ggx::MIN_ALPHA.sqrt(), 0.0]
+}
 
 /// Why a fit could not run.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -522,7 +531,8 @@ impl FitProblem<'_> {
             .validated()
             .map_err(|e| FitError::Config(format!("fixed parameters: {e}")))?;
         let started = Instant::now();
-        let mut x = [config.start; FREE];
+        let lower = free_lower_bounds();
+        let mut x: [f32; FREE] = std::array::from_fn(|i| config.start.max(lower[i]));
         let (mut m, mut v) = ([0f64; FREE], [0f64; FREE]);
         let mut loss = Vec::with_capacity(config.iterations + 1);
         let mut trajectory = Vec::with_capacity(config.iterations + 1);
@@ -560,7 +570,7 @@ impl FitProblem<'_> {
                 let m_hat = m[i] / (1.0 - b1.powi(k as i32 + 1));
                 let v_hat = v[i] / (1.0 - b2.powi(k as i32 + 1));
                 let step = lr * m_hat / (v_hat.sqrt() + 1e-10);
-                x[i] = ((x[i] as f64 - step).clamp(0.0, 1.0)) as f32;
+                x[i] = ((x[i] as f64 - step).clamp(lower[i] as f64, 1.0)) as f32;
             }
             progress(k, l);
         }
