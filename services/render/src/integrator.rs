@@ -349,7 +349,7 @@ pub fn path_pixel<T: BsdfScalar>(
     seed: u64,
     material: impl Fn(u32) -> PrincipledParams<T>,
 ) -> Option<SinglePathSample<T>> {
-    path_pixel_sampled(
+    path_pixel_frozen_sampling(
         scene,
         camera,
         projector,
@@ -362,41 +362,16 @@ pub fn path_pixel<T: BsdfScalar>(
     )
 }
 
-/// [`path_pixel`] with the sampling frozen: every random decision of the path (BSDF lobe and
-/// direction, Russian roulette) is made with `sampling(instance)`, while the hits are shaded
-/// with `material(instance)` (throughput f(material)·cos / pdf(sampling)). For the same seed
-/// and `sampling`, the paths are then identical whatever `material` is, so the estimate is a
-/// smooth function of `material` whose derivative is exactly what dual-number materials with
-/// real part `sampling` compute: the basis of a finite-difference check of the multi-path
-/// gradient. With `sampling = material` this is [`path_pixel`] (up to f32 rounding).
+/// [`path_pixel`] with the sampling frozen when `sampling` is given: every random decision of
+/// the path (BSDF lobe and direction, Russian roulette) is made with `sampling(instance)`,
+/// while the hits are shaded with `material(instance)` (throughput f(material)·cos /
+/// pdf(sampling)). For the same seed and `sampling`, the paths are then identical whatever
+/// `material` is, so the estimate is a smooth function of `material` whose derivative is
+/// exactly what dual-number materials with real part `sampling` compute: the basis of a
+/// finite-difference check of the multi-path gradient. With `sampling = material` this is
+/// [`path_pixel`] (up to f32 rounding); with `None` it is [`path_pixel`].
 #[allow(clippy::too_many_arguments)]
 pub fn path_pixel_frozen_sampling<T: BsdfScalar>(
-    scene: &Scene,
-    camera: &Camera,
-    projector: &Projector,
-    u: u32,
-    v: u32,
-    transport: LightTransport,
-    samples_per_pixel: u32,
-    seed: u64,
-    material: impl Fn(u32) -> PrincipledParams<T>,
-    sampling: impl Fn(u32) -> PrincipledParams<f32>,
-) -> Option<SinglePathSample<T>> {
-    path_pixel_sampled(
-        scene,
-        camera,
-        projector,
-        (u, v),
-        transport,
-        samples_per_pixel,
-        seed,
-        material,
-        Some(&sampling as &dyn Fn(u32) -> PrincipledParams<f32>),
-    )
-}
-
-#[allow(clippy::too_many_arguments)]
-fn path_pixel_sampled<T: BsdfScalar>(
     scene: &Scene,
     camera: &Camera,
     projector: &Projector,

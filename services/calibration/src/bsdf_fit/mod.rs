@@ -29,7 +29,7 @@ pub use target::{MeasuredTarget, TargetError, measured_target};
 use std::time::Instant;
 
 use glint_render::bsdf::PrincipledParams;
-use glint_render::integrator::{Camera, LightTransport, path_pixel, path_pixel_frozen_sampling};
+use glint_render::integrator::{Camera, LightTransport, path_pixel_frozen_sampling};
 use glint_render::projector::Projector;
 use glint_render::scene::Scene;
 use num_dual::Dual32;
@@ -320,37 +320,21 @@ impl FitProblem<'_> {
                 self.scene.material_of(i).map(|x| T::from(x))
             }
         };
-        let sample = match sampling {
-            None => path_pixel(
-                self.scene,
-                &view.camera,
-                &view.projector,
-                u,
-                v,
-                r.transport,
-                r.samples_per_pixel,
-                seed,
-                material,
-            ),
-            Some(s) => path_pixel_frozen_sampling(
-                self.scene,
-                &view.camera,
-                &view.projector,
-                u,
-                v,
-                r.transport,
-                r.samples_per_pixel,
-                seed,
-                material,
-                |i| {
-                    if self.is_fitted(i) {
-                        *s
-                    } else {
-                        *self.scene.material_of(i)
-                    }
-                },
-            ),
+        let frozen = |i: u32| match sampling {
+            Some(s) if self.is_fitted(i) => *s,
+            _ => *self.scene.material_of(i),
         };
+        let sample = path_pixel_frozen_sampling(
+            self.scene,
+            &view.camera,
+            &view.projector,
+            (u, v),
+            r.transport,
+            r.samples_per_pixel,
+            seed,
+            material,
+            sampling.map(|_| &frozen as &dyn Fn(u32) -> PrincipledParams<f32>),
+        );
         sample
             .filter(|s| self.is_fitted(s.instance))
             .map(|s| s.radiance)
