@@ -91,6 +91,10 @@ pub struct BsdfArgs {
     /// shiny metals. 0 renders exactly as the camera does.
     #[arg(long, default_value_t = 0.5, value_parser = parse_unit_interval)]
     pub min_indirect_roughness: f32,
+    /// The regularisation floor of the last iteration: it falls linearly from
+    /// --min-indirect-roughness to this, so that the fit ends on nearly exact renders.
+    #[arg(long, default_value_t = 0.1, value_parser = parse_unit_interval)]
+    pub final_min_indirect_roughness: f32,
 }
 
 fn parse_unit_interval(s: &str) -> Result<f32, String> {
@@ -438,6 +442,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
     let config = FitConfig {
         iterations: args.iterations,
         reseed: args.reseed,
+        final_min_indirect_roughness: Some(args.final_min_indirect_roughness),
         ..FitConfig::default()
     };
     let bar = crate::progress::bar(args.iterations as u64, "BSDF fit");
@@ -473,6 +478,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         "loss": format!("{loss:?}"),
         "block_px": args.block_px,
         "reseed": args.reseed,
+        "final_min_indirect_roughness": args.final_min_indirect_roughness,
         "pixel_step": step,
         "pixels": result.pixels,
         "per_view": per_view,

@@ -17,6 +17,9 @@
 //! - Optimiser: Adam (Kingma & Ba), every free parameter started at 0.5 as in the paper, each
 //!   step projected onto the parameters' valid range: [0, 1], roughness [√α_min, 1]
 //!   ([`free_lower_bounds`]).
+//! - Shiny metals: multi-path renders may be regularised (later vertices at least
+//!   `min_indirect_roughness` rough, [`LightTransport::regularised`]), the floor falling over
+//!   the iterations ([`FitConfig::final_min_indirect_roughness`]).
 //! - Free parameters: base_color, metallic, roughness, specular; the others stay at
 //!   [`FitConfig::fixed`] (default: their lobes off, as the mock camera's metals have them).
 
@@ -100,6 +103,13 @@ pub struct FitConfig {
     /// Without it every iteration reuses the same samples (common random numbers): a
     /// deterministic loss, but one whose noise the optimiser can fit.
     pub reseed: bool,
+    /// With a regularised multi-path rendering: the roughness floor of the last iteration.
+    /// The floor falls linearly from the rendering's own `min_indirect_roughness` to this
+    /// over the iterations — early steps see smooth renders of a blurred scene, the last ones
+    /// nearly the camera's own paths, which removes most of the regularisation's bias
+    /// (Kaplanyan & Dachsbacher shrink it as the estimate converges, for the same reason).
+    /// `None` keeps the floor fixed.
+    pub final_min_indirect_roughness: Option<f32>,
 }
 
 /// Seed step between iterations with [`FitConfig::reseed`].
@@ -116,6 +126,7 @@ impl Default for FitConfig {
             start: 0.5,
             fixed: PrincipledParams::new(0.5, 0.5, 0.5, 0.5).expect("constants are valid"),
             reseed: false,
+            final_min_indirect_roughness: None,
         }
     }
 }
@@ -126,7 +137,8 @@ pub struct FitResult {
     /// The fitted parameters (free ones fitted, the others as fixed).
     #[serde(skip)]
     pub params: PrincipledParams<f32>,
-    /// Loss before each step and after the last (iterations + 1 values).
+    /// Loss before each step and after the last (iterations + 1 values), each with its own
+    /// step's regularisation ([`FitConfig::final_min_indirect_roughness`]).
     pub loss: Vec<f64>,
     /// Free parameters before each step and after the last.
     pub trajectory: Vec<[f32; FREE]>,
@@ -487,6 +499,25 @@ impl FitProblem<'_> {
         }
     }
 
+    /// The light transport of iteration `k`: the rendering's, with the regularisation floor
+    /// moved towards [`FitConfig::final_min_indirect_roughness`].
+    fn transport_at(&self, config: &FitConfig, k: usize) -> LightTransport {
+        let transport = self.rendering.transport;
+        match (transport, config.final_min_indirect_roughness) {
+            (
+                LightTransport::MultiPath {
+                    min_indirect_roughness: start,
+                    ..
+                },
+                Some(end),
+            ) => {
+                let f = k as f32 / (config.iterations.max(2) - 1) as f32;
+                transport.regularised(start + (end - start) * f.min(1.0))
+            }
+            _ => transport,
+        }
+    }
+
     /// Runs Adam from `config.start` (see the module doc).
     pub fn fit(&self, config: &FitConfig) -> Result<FitResult, FitError> {
         self.fit_with_progress(config, |_, _| {})
@@ -504,10 +535,13 @@ impl FitProblem<'_> {
             && config.final_learning_rate > 0.0
             && (0.0..1.0).contains(&config.beta1)
             && (0.0..1.0).contains(&config.beta2)
-            && (0.0..=1.0).contains(&config.start);
+            && (0.0..=1.0).contains(&config.start)
+            && config
+                .final_min_indirect_roughness
+                .is_none_or(|r| (0.0..=1.0).contains(&r));
         if !valid {
             return Err(FitError::Config(format!(
-                "iterations must be ≥ 1, learning rates > 0, betas in [0, 1) and start in [0, 1]; got {config:?}"
+                "iterations must be ≥ 1, learning rates > 0, betas in [0, 1), start and final_min_indirect_roughness in [0, 1]; got {config:?}"
             )));
         }
         config
@@ -531,6 +565,7 @@ impl FitProblem<'_> {
             let this_step = FitProblem {
                 rendering: PixelRendering {
                     seed: self.rendering.seed.wrapping_add(seed_offset),
+                    transport: self.transport_at(config, k),
                     ..self.rendering
                 },
                 ..*self
@@ -558,7 +593,14 @@ impl FitProblem<'_> {
             }
             progress(k, l);
         }
-        let (l, _, _) = self.loss_and_gradient(&config.fixed, x);
+        let last = FitProblem {
+            rendering: PixelRendering {
+                transport: self.transport_at(config, config.iterations - 1),
+                ..self.rendering
+            },
+            ..*self
+        };
+        let (l, _, _) = last.loss_and_gradient(&config.fixed, x);
         loss.push(l);
         trajectory.push(x);
         Ok(FitResult {
