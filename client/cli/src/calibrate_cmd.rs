@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use anyhow::Context;
 use glint_calibration::bsdf_fit::{
-    FREE_NAMES, FitConfig, FitProblem, FitTarget, FitView, Loss, MeasuredTarget, PixelRendering,
-    Residual, error_map_png, fit_history_png, free_of, measured_target,
+    FREE_NAMES, FitConfig, FitProblem, FitResult, FitTarget, FitView, Loss, MeasuredTarget,
+    PixelRendering, Residual, error_map_png, fit_history_png, free_of, measured_target,
 };
 use glint_calibration::material_map::{params_from_map, params_to_map};
 use glint_calibration::response::{
@@ -91,6 +91,11 @@ pub struct BsdfArgs {
     /// shiny metals. 0 renders exactly as the camera does.
     #[arg(long, default_value_t = 0.5, value_parser = parse_unit_interval)]
     pub min_indirect_roughness: f32,
+    /// Starting value of every free parameter, comma separated for several fits from
+    /// different starts: the one with the lowest final loss is kept. 0.5 is the paper's start;
+    /// a near-mirror (the Chrome Screw) also needs a low one, e.g. `0.5,0.1`.
+    #[arg(long, value_delimiter = ',', default_value = "0.5", value_parser = parse_unit_interval)]
+    pub start: Vec<f32>,
     /// The regularisation floor of the last iteration: it falls linearly from
     /// --min-indirect-roughness to this, so that the fit ends on nearly exact renders.
     #[arg(long, default_value_t = 0.1, value_parser = parse_unit_interval)]
@@ -445,9 +450,34 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         final_min_indirect_roughness: Some(args.final_min_indirect_roughness),
         ..FitConfig::default()
     };
-    let bar = crate::progress::bar(args.iterations as u64, "BSDF fit");
-    let result = problem.fit_with_progress(&config, |_, _| bar.inc(1))?;
+    let bar = crate::progress::bar((args.iterations * args.start.len()) as u64, "BSDF fit");
+    let mut fits = Vec::with_capacity(args.start.len());
+    for &start in &args.start {
+        let config = FitConfig {
+            start,
+            ..config.clone()
+        };
+        fits.push((
+            start,
+            problem.fit_with_progress(&config, |_, _| bar.inc(1))?,
+        ));
+    }
     bar.finish_and_clear();
+    let final_loss = |r: &FitResult| *r.loss.last().expect("iterations ≥ 1");
+    let starts: Vec<_> = fits
+        .iter()
+        .map(|(start, r)| {
+            serde_json::json!({
+                "start": start,
+                "params": params_to_map(&r.params),
+                "final_loss": final_loss(r),
+            })
+        })
+        .collect();
+    let (_, result) = fits
+        .into_iter()
+        .min_by(|a, b| final_loss(&a.1).total_cmp(&final_loss(&b.1)))
+        .expect("--start has at least one value");
 
     let label = format!("obj {}", loaded.obj_id);
     let per_view: Vec<_> = args
@@ -479,6 +509,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         "block_px": args.block_px,
         "reseed": args.reseed,
         "final_min_indirect_roughness": args.final_min_indirect_roughness,
+        "starts": starts,
         "pixel_step": step,
         "pixels": result.pixels,
         "per_view": per_view,

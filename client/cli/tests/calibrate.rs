@@ -291,6 +291,18 @@ fn bad_calibration_inputs_are_clear_errors_without_output() {
         &["reference_surface.json", "/material/metallic"],
     );
     std::fs::write(&reference, good).unwrap();
+    // Out-of-range numbers are usage errors (exit 2) that name the flag and the value.
+    for (flag, value) in [
+        ("--start", "0.5,1.5"),
+        ("--min-indirect-roughness", "1.2"),
+        ("--final-min-indirect-roughness", "2"),
+    ] {
+        let o = bsdf(&capture, &g, &[flag, value]);
+        let err = text(&o);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(err.contains(flag), "{flag} not in: {err}");
+        assert!(!out.exists(), "{err}");
+    }
 
     // eval-bsdf: a material missing a parameter, and a capture without a held-out view.
     let material = dir.path().join("hand_made.json");
