@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use anyhow::Context;
 use glint_calibration::bsdf_fit::{
-    FREE_NAMES, FitConfig, FitProblem, FitResult, FitTarget, FitView, Loss, MeasuredTarget,
-    PixelRendering, Residual, error_map_png, fit_history_png, free_of, measured_target,
+    FREE_NAMES, FitConfig, FitProblem, FitTarget, FitView, Loss, MeasuredTarget, PixelRendering,
+    Residual, error_map_png, fit_history_png, free_of, measured_target,
 };
 use glint_calibration::material_map::{params_from_map, params_to_map};
 use glint_calibration::response::{
@@ -101,6 +101,9 @@ pub struct BsdfArgs {
     #[arg(long, default_value_t = 0.1, value_parser = parse_unit_interval)]
     pub final_min_indirect_roughness: f32,
 }
+
+/// Seed of the renders that judge fits from several starts (not any fit's own).
+const JUDGE_SEED: u64 = 0x00D6_E5EE;
 
 fn parse_unit_interval(s: &str) -> Result<f32, String> {
     match s.parse::<f32>() {
@@ -463,21 +466,52 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         ));
     }
     bar.finish_and_clear();
-    let final_loss = |r: &FitResult| *r.loss.last().expect("iterations ≥ 1");
+    // The fits are judged alike: the unbiased L2 of each, rendered as the last iteration
+    // rendered (final regularisation floor) but with 4× the samples and other random numbers.
+    let judge = FitProblem {
+        rendering: PixelRendering {
+            transport: rendering
+                .transport
+                .regularised(args.final_min_indirect_roughness),
+            samples_per_pixel: (rendering.samples_per_pixel * 4).min(256),
+            seed: JUDGE_SEED,
+        },
+        ..problem
+    };
+    let judged: Vec<f64> = if fits.len() > 1 {
+        fits.iter()
+            .map(|(_, r)| judge.unbiased_l2(&r.params))
+            .collect()
+    } else {
+        vec![f64::NAN]
+    };
+    let elapsed_s: f64 = fits.iter().map(|(_, r)| r.elapsed_s).sum();
     let starts: Vec<_> = fits
         .iter()
-        .map(|(start, r)| {
+        .zip(&judged)
+        .map(|((start, r), judged)| {
             serde_json::json!({
                 "start": start,
                 "params": params_to_map(&r.params),
-                "final_loss": final_loss(r),
+                "final_loss": r.loss.last(),
+                "judged_l2": judged,
+                "elapsed_s": r.elapsed_s,
             })
         })
         .collect();
-    let (_, result) = fits
-        .into_iter()
-        .min_by(|a, b| final_loss(&a.1).total_cmp(&final_loss(&b.1)))
-        .expect("--start has at least one value");
+    let best = (0..fits.len())
+        .min_by(|&a, &b| judged[a].total_cmp(&judged[b]))
+        .unwrap_or(0);
+    if fits.len() > 1 {
+        for ((start, r), judged) in fits.iter().zip(&judged) {
+            let p = &r.params;
+            println!(
+                "  start {start}: base_color {:.3}, metallic {:.3}, roughness {:.3}, specular {:.3}; unbiased L2 {judged:.4}",
+                p.base_color, p.metallic, p.roughness, p.specular
+            );
+        }
+    }
+    let (_, result) = fits.swap_remove(best);
 
     let label = format!("obj {}", loaded.obj_id);
     let per_view: Vec<_> = args
@@ -513,7 +547,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         "pixel_step": step,
         "pixels": result.pixels,
         "per_view": per_view,
-        "elapsed_s": result.elapsed_s,
+        "elapsed_s": elapsed_s,
         "loss": result.loss,
         "trajectory": result.trajectory,
     });
@@ -558,7 +592,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         result.loss[0],
         result.loss[result.loss.len() - 1],
         args.iterations,
-        result.elapsed_s,
+        elapsed_s,
         args.out.display()
     );
     Ok(())

@@ -456,6 +456,41 @@ impl FitProblem<'_> {
         (sse / norm, grad.map(|g| g / norm), n)
     }
 
+    /// An unbiased estimate of the L2 loss Σ (r − t)² / Σ t² of the fitted material at
+    /// `params`, from two independent renders r̂, r̂' of every block:
+    /// E[(r̂ − t)(r̂' − t)] = (r − t)², where the plain (r̂ − t)² would add Var r̂ — a penalty
+    /// on sharp, noisy materials that would bias any comparison towards rough ones. For
+    /// choosing between fits; single-path renders are exact and give the plain L2.
+    pub fn unbiased_l2(&self, params: &PrincipledParams<f32>) -> f64 {
+        let zero = || (0.0f64, 0.0f64);
+        let (cross, norm) = self
+            .loss_groups()
+            .par_iter()
+            .fold(zero, |(mut cross, mut norm), group| {
+                let (mut r, mut r_other, mut t, mut m) = (0.0, 0.0, 0.0, 0);
+                for &(k, p, tp) in group {
+                    let Some(radiance) = self.shade(k, p, params, None) else {
+                        continue;
+                    };
+                    r += radiance as f64;
+                    r_other += self
+                        .shade_seeded(k, p, params, None, DECORRELATED_SEED_OFFSET)
+                        .unwrap_or(0.0) as f64;
+                    t += tp as f64;
+                    m += 1;
+                }
+                if m > 0 {
+                    let mf = m as f64;
+                    let (r, r_other, t) = (r / mf, r_other / mf, t / mf);
+                    cross += mf * (r - t) * (r_other - t);
+                    norm += mf * t * t;
+                }
+                (cross, norm)
+            })
+            .reduce(zero, |a, b| (a.0 + b.0, a.1 + b.1));
+        if norm > 0.0 { cross / norm } else { f64::NAN }
+    }
+
     /// The loss with the fitted material at `free` but every random decision of every path
     /// made with the material at `sampled_at` (frozen sampling,
     /// [`path_pixel_frozen_sampling`]): a smooth function of `free` for fixed `sampled_at`,

@@ -587,3 +587,102 @@ fn regularisation_floor_falls_linearly_to_its_final_value() {
     };
     assert!(matches!(problem.fit(&bad), Err(FitError::Config(_))));
 }
+
+#[test]
+fn unbiased_l2_drops_the_renders_own_variance() {
+    // Single-path renders are exact: the unbiased L2 is the plain one.
+    let (scene, camera, projector) = sphere_setup();
+    let truth = PrincipledParams::new(0.78, 1.0, 0.16, 0.5).unwrap();
+    let target = target_of(&scene, &camera, &projector, &truth);
+    let views = [FitView {
+        camera,
+        projector,
+        target,
+    }];
+    let single = FitProblem {
+        scene: &scene,
+        views: &views,
+        instances: &[0],
+        rendering: PixelRendering::SINGLE_PATH,
+        residual: Residual::SameSamples,
+        loss: Loss::L2,
+        block_px: 1,
+    };
+    let other = PrincipledParams::new(0.5, 0.8, 0.3, 0.5).unwrap();
+    let plain = single.loss_and_gradient(&other, free_of(&other)).0;
+    let unbiased = single.unbiased_l2(&other);
+    assert!(
+        (unbiased - plain).abs() < 1e-9 * plain,
+        "{unbiased} vs {plain}"
+    );
+
+    // Multi-path: the plain loss of a render r̂ exceeds the unbiased one by its variance,
+    // E[(r̂ − t)² − (r̂ − t)(r̂' − t)] = Var r̂, which two other independent renders a, b
+    // estimate as Σ (a − b)² / 2. Over ≈ 870 pixels both sides carry a few per cent of
+    // sampling error; 30 % allows for it.
+    // A rough dielectric: no glossy fireflies, so sample variances are well behaved.
+    let truth = PrincipledParams::new(0.6, 0.0, 0.9, 0.5).unwrap();
+    let (scene, camera, projector) = sphere_and_wall_setup();
+    let mut target = FitTarget::default();
+    for v in (0..camera.intrinsics.height_px).step_by(3) {
+        for u in (0..camera.intrinsics.width_px).step_by(3) {
+            let material = |i: u32| if i == 0 { truth } else { *scene.material_of(i) };
+            if let Some(s) = path_pixel(
+                &scene,
+                &camera,
+                &projector,
+                u,
+                v,
+                LightTransport::MULTI_PATH_DEFAULT,
+                64,
+                99,
+                material,
+            )
+            .filter(|s| s.instance == 0)
+            {
+                target.pixels.push((u, v));
+                target.radiance.push(s.radiance);
+            }
+        }
+    }
+    let views = [FitView {
+        camera,
+        projector,
+        target,
+    }];
+    let multi = FitProblem {
+        scene: &scene,
+        views: &views,
+        instances: &[0],
+        rendering: PixelRendering {
+            transport: LightTransport::MULTI_PATH_DEFAULT,
+            samples_per_pixel: 4,
+            seed: 3,
+        },
+        residual: Residual::SameSamples,
+        loss: Loss::L2,
+        block_px: 1,
+    };
+    let plain = multi.loss_and_gradient(&truth, free_of(&truth)).0;
+    let unbiased = multi.unbiased_l2(&truth);
+    let seeded = |seed| FitProblem {
+        rendering: PixelRendering {
+            seed,
+            ..multi.rendering
+        },
+        ..multi
+    };
+    let (a, b) = (seeded(1001).render(&truth), seeded(1002).render(&truth));
+    let (mut spread, mut norm) = (0.0, 0.0);
+    for ((x, y), t) in a[0].iter().zip(&b[0]).zip(&views[0].target.radiance) {
+        if x.is_finite() && y.is_finite() {
+            spread += ((x - y) as f64).powi(2) / 2.0;
+            norm += (*t as f64).powi(2);
+        }
+    }
+    let variance = spread / norm;
+    assert!(
+        ((plain - unbiased) - variance).abs() < 0.3 * variance,
+        "plain {plain} − unbiased {unbiased} vs render variance {variance}"
+    );
+}
