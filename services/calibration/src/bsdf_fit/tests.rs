@@ -45,6 +45,24 @@ fn sphere_setup() -> (Scene, Camera, Projector) {
     (scene, camera, projector)
 }
 
+/// The fit of instance 0's material in `views` of `scene`, rendered with `rendering`: L2 over
+/// pixels, same-sample residual (what most tests here vary one field of).
+fn sphere_problem<'a>(
+    scene: &'a Scene,
+    views: &'a [FitView],
+    rendering: PixelRendering,
+) -> FitProblem<'a> {
+    FitProblem {
+        scene,
+        views,
+        instances: &[0],
+        rendering,
+        residual: Residual::SameSamples,
+        loss: Loss::L2,
+        block_px: 1,
+    }
+}
+
 /// The target: every other pixel (in u and v) that sees the sphere, rendered with `truth` by
 /// the renderer.
 fn target_of(
@@ -77,15 +95,7 @@ fn gradient_matches_central_differences() {
         projector,
         target,
     }];
-    let problem = FitProblem {
-        scene: &scene,
-        views: &views,
-        instances: &[0],
-        rendering: PixelRendering::SINGLE_PATH,
-        residual: Residual::SameSamples,
-        loss: Loss::L2,
-        block_px: 1,
-    };
+    let problem = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
     let fixed = FitConfig::default().fixed;
     for at in [[0.5f32; FREE], [0.3, 0.7, 0.4, 0.2]] {
         let (_, grad, _) = problem.loss_and_gradient(&fixed, at);
@@ -122,15 +132,7 @@ fn fit_of(truth: PrincipledParams<f32>) -> (FitResult, f64) {
         projector,
         target,
     }];
-    let problem = FitProblem {
-        scene: &scene,
-        views: &views,
-        instances: &[0],
-        rendering: PixelRendering::SINGLE_PATH,
-        residual: Residual::SameSamples,
-        loss: Loss::L2,
-        block_px: 1,
-    };
+    let problem = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
     let result = problem.fit(&FitConfig::default()).unwrap();
     let rendered = problem.render(&result.params);
     let (mut se, mut norm) = (0.0, 0.0);
@@ -294,28 +296,28 @@ fn sphere_and_wall_setup() -> (Scene, Camera, Projector) {
     (scene, camera, projector)
 }
 
-#[test]
-fn multi_path_gradient_matches_central_differences_with_frozen_sampling() {
-    let (scene, camera, projector) = sphere_and_wall_setup();
-    let truth = PrincipledParams::new(0.8, 0.9, 0.2, 0.5).unwrap();
-    let rendering = PixelRendering {
-        transport: LightTransport::MULTI_PATH_DEFAULT,
-        samples_per_pixel: 4,
-        seed: 11,
-    };
-    // Target: the sphere's pixels rendered with the truth (another seed, as a measurement).
+/// A measurement of the sphere (instance 0) of [`sphere_and_wall_setup`]: every third pixel (in
+/// u and v) that sees it, rendered with `truth` by exact multi-path transport at `spp`
+/// samples with seed 99, which no fit here uses.
+fn multi_path_target(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    truth: PrincipledParams<f32>,
+    spp: u32,
+) -> FitTarget {
     let mut target = FitTarget::default();
     for v in (0..camera.intrinsics.height_px).step_by(3) {
         for u in (0..camera.intrinsics.width_px).step_by(3) {
             let material = |i: u32| if i == 0 { truth } else { *scene.material_of(i) };
             if let Some(s) = path_pixel(
-                &scene,
-                &camera,
-                &projector,
+                scene,
+                camera,
+                projector,
                 u,
                 v,
-                rendering.transport,
-                16,
+                LightTransport::MULTI_PATH_DEFAULT,
+                spp,
                 99,
                 material,
             )
@@ -326,6 +328,20 @@ fn multi_path_gradient_matches_central_differences_with_frozen_sampling() {
             }
         }
     }
+    target
+}
+
+#[test]
+fn multi_path_gradient_matches_central_differences_with_frozen_sampling() {
+    let (scene, camera, projector) = sphere_and_wall_setup();
+    let truth = PrincipledParams::new(0.8, 0.9, 0.2, 0.5).unwrap();
+    let rendering = PixelRendering {
+        transport: LightTransport::MULTI_PATH_DEFAULT,
+        samples_per_pixel: 4,
+        seed: 11,
+    };
+    // Target: the sphere's pixels rendered with the truth (another seed, as a measurement).
+    let target = multi_path_target(&scene, &camera, &projector, truth, 16);
     // The sphere is ≈ 100 px across: π (50 px)² / 9 ≈ 870 pixels on a 3-px grid.
     assert!(target.pixels.len() > 700, "{}", target.pixels.len());
     let views = [FitView {
@@ -333,15 +349,7 @@ fn multi_path_gradient_matches_central_differences_with_frozen_sampling() {
         projector,
         target,
     }];
-    let problem = FitProblem {
-        scene: &scene,
-        views: &views,
-        instances: &[0],
-        rendering,
-        residual: Residual::SameSamples,
-        loss: Loss::L2,
-        block_px: 1,
-    };
+    let problem = sphere_problem(&scene, &views, rendering);
     let fixed = FitConfig::default().fixed;
     // The wall really reflects light back: multi-path differs from single-path on the sphere.
     let single = FitProblem {
@@ -442,15 +450,7 @@ fn roughness_range_ends_where_its_derivative_vanishes() {
         projector,
         target,
     }];
-    let problem = FitProblem {
-        scene: &scene,
-        views: &views,
-        instances: &[0],
-        rendering: PixelRendering::SINGLE_PATH,
-        residual: Residual::SameSamples,
-        loss: Loss::L2,
-        block_px: 1,
-    };
+    let problem = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
     let fixed = FitConfig::default().fixed;
     // Below √α_min the GGX width is floored: the loss is flat, its derivative exactly 0.
     let (_, below, _) = problem.loss_and_gradient(&fixed, [0.92, 1.0, 0.5 * lower, 0.5]);
@@ -466,29 +466,8 @@ fn regularised_multi_path_fit_recovers_a_shiny_metal_beside_a_wall() {
     // The Gear's material: its multi-path radiance includes wall → sphere and sphere → wall →
     // sphere light, and its second glossy vertex is what regularisation blurs.
     let truth = PrincipledParams::new(0.78, 1.0, 0.16, 0.5).unwrap();
-    let mut target = FitTarget::default();
-    for v in (0..camera.intrinsics.height_px).step_by(3) {
-        for u in (0..camera.intrinsics.width_px).step_by(3) {
-            let material = |i: u32| if i == 0 { truth } else { *scene.material_of(i) };
-            // The "camera": exact transport, 64 spp, its own seed.
-            if let Some(s) = path_pixel(
-                &scene,
-                &camera,
-                &projector,
-                u,
-                v,
-                LightTransport::MULTI_PATH_DEFAULT,
-                64,
-                99,
-                material,
-            )
-            .filter(|s| s.instance == 0)
-            {
-                target.pixels.push((u, v));
-                target.radiance.push(s.radiance);
-            }
-        }
-    }
+    // The "camera": exact transport, 64 spp, its own seed.
+    let target = multi_path_target(&scene, &camera, &projector, truth, 64);
     // The capture's fireflies (sphere → wall → sphere paths of the point light) are rare
     // and bright: under L2 a few of them pull F0 up by 15 % (measured); Huber with δ at the
     // 90th percentile of the target bounds their pull, as `glint calibrate bsdf --loss huber`.
@@ -502,19 +481,16 @@ fn regularised_multi_path_fit_recovers_a_shiny_metal_beside_a_wall() {
         projector,
         target,
     }];
+    // `glint calibrate bsdf`'s defaults: floor 0.5 falling to 0.1, 16 spp.
+    let rendering = PixelRendering {
+        transport: LightTransport::MULTI_PATH_DEFAULT.regularised(0.5),
+        samples_per_pixel: 16,
+        seed: 5,
+    };
     let problem = FitProblem {
-        scene: &scene,
-        views: &views,
-        instances: &[0],
-        rendering: PixelRendering {
-            // `glint calibrate bsdf`'s defaults: floor 0.5 falling to 0.1, 16 spp.
-            transport: LightTransport::MULTI_PATH_DEFAULT.regularised(0.5),
-            samples_per_pixel: 16,
-            seed: 5,
-        },
         residual: Residual::Decorrelated,
         loss,
-        block_px: 1,
+        ..sphere_problem(&scene, &views, rendering)
     };
     let config = FitConfig {
         iterations: 150,
@@ -541,19 +517,15 @@ fn regularisation_floor_falls_linearly_to_its_final_value() {
         projector,
         target,
     }];
-    let problem = FitProblem {
-        scene: &scene,
-        views: &views,
-        instances: &[0],
-        rendering: PixelRendering {
+    let problem = sphere_problem(
+        &scene,
+        &views,
+        PixelRendering {
             transport: LightTransport::MULTI_PATH_DEFAULT.regularised(0.5),
             samples_per_pixel: 1,
             seed: 1,
         },
-        residual: Residual::SameSamples,
-        loss: Loss::L2,
-        block_px: 1,
-    };
+    );
     let config = FitConfig {
         iterations: 5,
         final_min_indirect_roughness: Some(0.1),
@@ -599,15 +571,7 @@ fn unbiased_l2_drops_the_renders_own_variance() {
         projector,
         target,
     }];
-    let single = FitProblem {
-        scene: &scene,
-        views: &views,
-        instances: &[0],
-        rendering: PixelRendering::SINGLE_PATH,
-        residual: Residual::SameSamples,
-        loss: Loss::L2,
-        block_px: 1,
-    };
+    let single = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
     let other = PrincipledParams::new(0.5, 0.8, 0.3, 0.5).unwrap();
     let plain = single.loss_and_gradient(&other, free_of(&other)).0;
     let unbiased = single.unbiased_l2(&other);
@@ -623,46 +587,21 @@ fn unbiased_l2_drops_the_renders_own_variance() {
     // A rough dielectric: no glossy fireflies, so sample variances are well behaved.
     let truth = PrincipledParams::new(0.6, 0.0, 0.9, 0.5).unwrap();
     let (scene, camera, projector) = sphere_and_wall_setup();
-    let mut target = FitTarget::default();
-    for v in (0..camera.intrinsics.height_px).step_by(3) {
-        for u in (0..camera.intrinsics.width_px).step_by(3) {
-            let material = |i: u32| if i == 0 { truth } else { *scene.material_of(i) };
-            if let Some(s) = path_pixel(
-                &scene,
-                &camera,
-                &projector,
-                u,
-                v,
-                LightTransport::MULTI_PATH_DEFAULT,
-                64,
-                99,
-                material,
-            )
-            .filter(|s| s.instance == 0)
-            {
-                target.pixels.push((u, v));
-                target.radiance.push(s.radiance);
-            }
-        }
-    }
+    let target = multi_path_target(&scene, &camera, &projector, truth, 64);
     let views = [FitView {
         camera,
         projector,
         target,
     }];
-    let multi = FitProblem {
-        scene: &scene,
-        views: &views,
-        instances: &[0],
-        rendering: PixelRendering {
+    let multi = sphere_problem(
+        &scene,
+        &views,
+        PixelRendering {
             transport: LightTransport::MULTI_PATH_DEFAULT,
             samples_per_pixel: 4,
             seed: 3,
         },
-        residual: Residual::SameSamples,
-        loss: Loss::L2,
-        block_px: 1,
-    };
+    );
     let plain = multi.loss_and_gradient(&truth, free_of(&truth)).0;
     let unbiased = multi.unbiased_l2(&truth);
     let seeded = |seed| FitProblem {
