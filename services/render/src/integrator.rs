@@ -461,13 +461,9 @@ fn trace<T: BsdfScalar>(
             result.first_hit = Some((hit.t, hit.instance));
         }
         let mut material = material(hit.instance);
-        let mut sampling_material = sampling.map_or_else(|| material.re(), |s| s(hit.instance));
         if bounce > 0 && material.roughness.re() < min_indirect_roughness {
             // Regularised vertex: a constant roughness, so no derivative flows through it.
             material.roughness = T::from(min_indirect_roughness);
-        }
-        if bounce > 0 {
-            sampling_material.roughness = sampling_material.roughness.max(min_indirect_roughness);
         }
         let frame = ShadingFrame::from_normal(hit.normal.into());
         let towards_previous = frame.to_local((-direction).into());
@@ -481,6 +477,17 @@ fn trace<T: BsdfScalar>(
         if bounce + 1 == max_bounces {
             break;
         }
+        let sampling_material = match sampling {
+            None => material.re(),
+            Some(frozen) => {
+                // Regularised like the shaded material.
+                let mut m = frozen(hit.instance);
+                if bounce > 0 {
+                    m.roughness = m.roughness.max(min_indirect_roughness);
+                }
+                m
+            }
+        };
         let Some(sample) = bsdf::sample(
             &sampling_material,
             towards_previous,

@@ -547,7 +547,7 @@ impl FitProblem<'_> {
                 Some(end),
             ) => {
                 let f = k as f32 / (config.iterations.max(2) - 1) as f32;
-                transport.regularised(start + (end - start) * f.min(1.0))
+                transport.regularised(start + (end - start) * f)
             }
             _ => transport,
         }
