@@ -132,6 +132,27 @@ fn capture(dir: &Path, part: &str, views: &str, resolution: &str, spp: &str) -> 
     out
 }
 
+/// `glint calibrate bsdf --scene scene --response response --out out` with `extra` arguments.
+fn calibrate_bsdf(
+    scene: &Path,
+    response: &Path,
+    out: &Path,
+    extra: &[&str],
+) -> std::process::Output {
+    let mut args = vec![
+        "calibrate",
+        "bsdf",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--response",
+        response.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    glint(&args)
+}
+
 /// `glint calibrate response` on view 0's stack of `capture`, into `dir/g.json`.
 fn response_of(dir: &Path, capture: &Path) -> PathBuf {
     let g = dir.join("g.json");
@@ -155,20 +176,12 @@ fn bsdf_fit_on_a_captured_zigzag_recovers_its_material() {
     let capture = capture(dir.path(), "zigzag", "2", "640x512", "16");
     let g = response_of(dir.path(), &capture);
     let material = dir.path().join("zigzag.json");
-    let o = glint(&[
-        "calibrate",
-        "bsdf",
-        "--scene",
-        capture.to_str().unwrap(),
-        "--response",
-        g.to_str().unwrap(),
-        "--out",
-        material.to_str().unwrap(),
-        "--views",
-        "0",
-        "--iterations",
-        "100",
-    ]);
+    let o = calibrate_bsdf(
+        &capture,
+        &g,
+        &material,
+        &["--views", "0", "--iterations", "100"],
+    );
     let out = text(&o);
     assert!(o.status.success(), "{out}");
     assert!(dir.path().join("zigzag.history.png").exists());
@@ -237,20 +250,12 @@ fn bad_calibration_inputs_are_clear_errors_without_output() {
     let g = response_of(dir.path(), &capture);
     let out = dir.path().join("m.json");
     let bsdf = |scene: &Path, response: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "calibrate",
-            "bsdf",
-            "--scene",
-            scene.to_str().unwrap(),
-            "--response",
-            response.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--iterations",
-            "2",
-        ];
-        args.extend_from_slice(extra);
-        glint(&args)
+        calibrate_bsdf(
+            scene,
+            response,
+            &out,
+            &[&["--iterations", "2"], extra].concat(),
+        )
     };
     let fails_with = |o: std::process::Output, needles: &[&str]| {
         let err = text(&o);
