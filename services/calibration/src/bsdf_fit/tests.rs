@@ -71,12 +71,23 @@ fn target_of(
     projector: &Projector,
     truth: &PrincipledParams<f32>,
 ) -> FitTarget {
+    sampled_target(camera, 2, |u, v| {
+        single_path_pixel(scene, camera, projector, u, v, |_| *truth).map(|s| s.radiance)
+    })
+}
+
+/// Every `step`-th pixel (in u and v) for which `radiance(u, v)` has a value.
+fn sampled_target(
+    camera: &Camera,
+    step: usize,
+    radiance: impl Fn(u32, u32) -> Option<f32>,
+) -> FitTarget {
     let mut target = FitTarget::default();
-    for v in (0..camera.intrinsics.height_px).step_by(2) {
-        for u in (0..camera.intrinsics.width_px).step_by(2) {
-            if let Some(s) = single_path_pixel(scene, camera, projector, u, v, |_| *truth) {
+    for v in (0..camera.intrinsics.height_px).step_by(step) {
+        for u in (0..camera.intrinsics.width_px).step_by(step) {
+            if let Some(r) = radiance(u, v) {
                 target.pixels.push((u, v));
-                target.radiance.push(s.radiance);
+                target.radiance.push(r);
             }
         }
     }
@@ -306,29 +317,22 @@ fn multi_path_target(
     truth: PrincipledParams<f32>,
     spp: u32,
 ) -> FitTarget {
-    let mut target = FitTarget::default();
-    for v in (0..camera.intrinsics.height_px).step_by(3) {
-        for u in (0..camera.intrinsics.width_px).step_by(3) {
-            let material = |i: u32| if i == 0 { truth } else { *scene.material_of(i) };
-            if let Some(s) = path_pixel(
-                scene,
-                camera,
-                projector,
-                u,
-                v,
-                LightTransport::MULTI_PATH_DEFAULT,
-                spp,
-                99,
-                material,
-            )
-            .filter(|s| s.instance == 0)
-            {
-                target.pixels.push((u, v));
-                target.radiance.push(s.radiance);
-            }
-        }
-    }
-    target
+    let material = |i: u32| if i == 0 { truth } else { *scene.material_of(i) };
+    sampled_target(camera, 3, |u, v| {
+        path_pixel(
+            scene,
+            camera,
+            projector,
+            u,
+            v,
+            LightTransport::MULTI_PATH_DEFAULT,
+            spp,
+            99,
+            material,
+        )
+        .filter(|s| s.instance == 0)
+        .map(|s| s.radiance)
+    })
 }
 
 #[test]
