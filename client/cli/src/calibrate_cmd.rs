@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::Context;
 use glint_calibration::bsdf_fit::{
     FREE_NAMES, FitConfig, FitProblem, FitTarget, FitView, Loss, MeasuredTarget, PixelRendering,
-    Residual, error_map_png, fit_history_png, free_of, measured_target,
+    Residual, StartFits, error_map_png, fit_history_png, free_of, measured_target,
 };
 use glint_calibration::material_map::{params_from_map, params_to_map};
 use glint_calibration::response::{
@@ -92,7 +92,8 @@ pub struct BsdfArgs {
     #[arg(long, default_value_t = 0.5, value_parser = parse_unit_interval)]
     pub min_indirect_roughness: f32,
     /// Starting value of every free parameter, comma separated for several fits from
-    /// different starts: the one with the lowest final loss is kept. 0.5 is the paper's start;
+    /// different starts: the one with the lowest unbiased L2 (two independent renders at 4×
+    /// the samples, the final floor) is kept. 0.5 is the paper's start;
     /// a near-mirror (the Chrome Screw) also needs a low one, e.g. `0.5,0.1`.
     #[arg(long, value_delimiter = ',', default_value = "0.5", value_parser = parse_unit_interval)]
     pub start: Vec<f32>,
@@ -101,9 +102,6 @@ pub struct BsdfArgs {
     #[arg(long, default_value_t = 0.1, value_parser = parse_unit_interval)]
     pub final_min_indirect_roughness: f32,
 }
-
-/// Seed of the renders that judge fits from several starts (not any fit's own).
-const JUDGE_SEED: u64 = 0x00D6_E5EE;
 
 fn parse_unit_interval(s: &str) -> Result<f32, String> {
     match s.parse::<f32>() {
@@ -454,64 +452,32 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         ..FitConfig::default()
     };
     let bar = crate::progress::bar((args.iterations * args.start.len()) as u64, "BSDF fit");
-    let mut fits = Vec::with_capacity(args.start.len());
-    for &start in &args.start {
-        let config = FitConfig {
-            start,
-            ..config.clone()
-        };
-        fits.push((
-            start,
-            problem.fit_with_progress(&config, |_, _| bar.inc(1))?,
-        ));
-    }
+    let StartFits { mut fits, best } =
+        problem.fit_from_starts(&config, &args.start, |_, _| bar.inc(1))?;
     bar.finish_and_clear();
-    // The fits are judged alike: the unbiased L2 of each, rendered as the last iteration
-    // rendered (final regularisation floor) but with 4× the samples and other random numbers.
-    let judge = FitProblem {
-        rendering: PixelRendering {
-            transport: rendering
-                .transport
-                .regularised(args.final_min_indirect_roughness),
-            samples_per_pixel: (rendering.samples_per_pixel * 4).min(256),
-            seed: JUDGE_SEED,
-        },
-        ..problem
-    };
-    let judged: Vec<f64> = if fits.len() > 1 {
-        fits.iter()
-            .map(|(_, r)| judge.unbiased_l2(&r.params))
-            .collect()
-    } else {
-        vec![f64::NAN]
-    };
-    let elapsed_s: f64 = fits.iter().map(|(_, r)| r.elapsed_s).sum();
+    let elapsed_s: f64 = fits.iter().map(|f| f.result.elapsed_s).sum();
     let starts: Vec<_> = fits
         .iter()
-        .zip(&judged)
-        .map(|((start, r), judged)| {
+        .map(|f| {
             serde_json::json!({
-                "start": start,
-                "params": params_to_map(&r.params),
-                "final_loss": r.loss.last(),
-                "judged_l2": judged,
-                "elapsed_s": r.elapsed_s,
+                "start": f.start,
+                "params": params_to_map(&f.result.params),
+                "final_loss": f.result.loss.last(),
+                "judged_l2": f.judged_l2,
+                "elapsed_s": f.result.elapsed_s,
             })
         })
         .collect();
-    let best = (0..fits.len())
-        .min_by(|&a, &b| judged[a].total_cmp(&judged[b]))
-        .unwrap_or(0);
     if fits.len() > 1 {
-        for ((start, r), judged) in fits.iter().zip(&judged) {
-            let p = &r.params;
+        for f in &fits {
+            let p = &f.result.params;
             println!(
-                "  start {start}: base_color {:.3}, metallic {:.3}, roughness {:.3}, specular {:.3}; unbiased L2 {judged:.4}",
-                p.base_color, p.metallic, p.roughness, p.specular
+                "  start {}: base_color {:.3}, metallic {:.3}, roughness {:.3}, specular {:.3}; unbiased L2 {:.4}",
+                f.start, p.base_color, p.metallic, p.roughness, p.specular, f.judged_l2
             );
         }
     }
-    let (_, result) = fits.swap_remove(best);
+    let result = fits.swap_remove(best).result;
 
     let label = format!("obj {}", loaded.obj_id);
     let per_view: Vec<_> = args

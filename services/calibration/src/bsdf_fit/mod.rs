@@ -148,6 +148,26 @@ pub struct FitResult {
     pub elapsed_s: f64,
 }
 
+/// Seed of the renders that judge fits from several starts (no fit's own).
+pub const JUDGE_SEED: u64 = 0x00D6_E5EE;
+
+/// One of [`FitProblem::fit_from_starts`]' fits.
+#[derive(Clone, Debug)]
+pub struct StartFit {
+    pub start: f32,
+    pub result: FitResult,
+    /// Its unbiased L2 under the common judging render (NaN with a single start).
+    pub judged_l2: f64,
+}
+
+/// The fits of [`FitProblem::fit_from_starts`], in the order of the starts, and the index of
+/// the one with the lowest judged loss.
+#[derive(Clone, Debug)]
+pub struct StartFits {
+    pub fits: Vec<StartFit>,
+    pub best: usize,
+}
+
 /// What the fit renders: the scene (other instances keep their own, known materials), the
 /// views with their targets, the instances whose (shared) material is fitted — every copy of
 /// the part in a bin has the same material — and how pixels are rendered. The loss sums over
@@ -551,6 +571,58 @@ impl FitProblem<'_> {
             }
             _ => transport,
         }
+    }
+
+    /// One fit from each of `starts` (the start value of every free parameter; `config.start`
+    /// is ignored), judged alike: the [`FitProblem::unbiased_l2`] of each result, rendered as
+    /// the last iteration renders (final regularisation floor) but with seed [`JUDGE_SEED`]
+    /// and, for multi-path, 4× the samples. A single start needs no judging (its `judged_l2` is NaN).
+    /// `progress(iteration, loss)` is called after every step of every fit.
+    pub fn fit_from_starts(
+        &self,
+        config: &FitConfig,
+        starts: &[f32],
+        mut progress: impl FnMut(usize, f64),
+    ) -> Result<StartFits, FitError> {
+        if starts.is_empty() {
+            return Err(FitError::Config("no start values given".into()));
+        }
+        let mut fits = Vec::with_capacity(starts.len());
+        for &start in starts {
+            let config = FitConfig {
+                start,
+                ..config.clone()
+            };
+            fits.push(StartFit {
+                start,
+                result: self.fit_with_progress(&config, &mut progress)?,
+                judged_l2: f64::NAN,
+            });
+        }
+        if fits.len() > 1 {
+            let transport = self.transport_at(config, config.iterations - 1);
+            let judge = FitProblem {
+                rendering: PixelRendering {
+                    transport,
+                    // Single-path renders are the exact centre ray: nothing to add.
+                    samples_per_pixel: match transport {
+                        LightTransport::SinglePath => self.rendering.samples_per_pixel,
+                        LightTransport::MultiPath { .. } => {
+                            (self.rendering.samples_per_pixel * 4).min(256)
+                        }
+                    },
+                    seed: JUDGE_SEED,
+                },
+                ..*self
+            };
+            for fit in &mut fits {
+                fit.judged_l2 = judge.unbiased_l2(&fit.result.params);
+            }
+        }
+        let best = (0..fits.len())
+            .min_by(|&a, &b| fits[a].judged_l2.total_cmp(&fits[b].judged_l2))
+            .unwrap_or(0);
+        Ok(StartFits { fits, best })
     }
 
     /// Runs Adam from `config.start` (see the module doc).

@@ -629,3 +629,48 @@ fn unbiased_l2_drops_the_renders_own_variance() {
         "plain {plain} − unbiased {unbiased} vs render variance {variance}"
     );
 }
+
+#[test]
+fn fits_from_several_starts_are_judged_by_their_loss() {
+    let (scene, camera, projector) = sphere_setup();
+    let truth = PrincipledParams::new(0.78, 1.0, 0.16, 0.5).unwrap();
+    let target = target_of(&scene, &camera, &projector, &truth);
+    let views = [FitView {
+        camera,
+        projector,
+        target,
+    }];
+    let problem = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
+    let config = FitConfig {
+        iterations: 20,
+        ..FitConfig::default()
+    };
+    let fits = problem
+        .fit_from_starts(&config, &[0.9, 0.2], |_, _| {})
+        .unwrap();
+    assert_eq!(fits.fits.len(), 2);
+    for fit in &fits.fits {
+        // Each is the plain fit from its start, and single-path judging is the plain L2.
+        let alone = problem
+            .fit(&FitConfig {
+                start: fit.start,
+                ..config.clone()
+            })
+            .unwrap();
+        assert_eq!(alone.trajectory, fit.result.trajectory);
+        let p = fit.result.params;
+        let plain = problem.loss_and_gradient(&p, free_of(&p)).0;
+        assert!((fit.judged_l2 - plain).abs() < 1e-9 * plain, "{fit:?}");
+    }
+    // 20 steps from 0.9 and from 0.2 end at different losses; the lower one is kept.
+    let [a, b] = [&fits.fits[0], &fits.fits[1]].map(|f| f.judged_l2);
+    assert!((a - b).abs() > 1e-3 * a.min(b), "{a} vs {b}");
+    assert_eq!(fits.best, if a < b { 0 } else { 1 });
+    // One start needs no judging; none is an error.
+    let one = problem.fit_from_starts(&config, &[0.5], |_, _| {}).unwrap();
+    assert!(one.fits[0].judged_l2.is_nan() && one.best == 0);
+    assert!(matches!(
+        problem.fit_from_starts(&config, &[], |_, _| {}),
+        Err(FitError::Config(_))
+    ));
+}
