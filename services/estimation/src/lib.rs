@@ -1,6 +1,6 @@
 //! Glint's estimation stage: from SLI depth to an object pose and its uncertainty.
 //!
-//! - [`uncertainty`]: per-pixel depth variance σ_z² from the pattern images (eq 1–5);
+//! - [`depth_sigma`]: per-pixel depth variance σ_z² from the pattern images (eq 1–5);
 //! - [`points`]: masked depth → camera-frame points → world frame (eq 6–7);
 //! - [`refine`]: uncertainty-weighted SDF Gauss–Newton / Levenberg–Marquardt over T_o_w
 //!   (eq 8–11) and the pose covariance from the Fisher information (eq 18–19);
@@ -9,7 +9,7 @@
 //! Conventions are the geometry crate's: metres, `t_a_b` maps b → a, left perturbations
 //! `T ← exp(δ)·T` with δ = (ρ, φ). Nothing here reads ground truth.
 
+pub mod depth_sigma;
 pub mod icp;
 pub mod points;
 pub mod refine;
-pub mod uncertainty;

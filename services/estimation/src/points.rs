@@ -19,7 +19,7 @@ pub struct DepthPoint {
 /// Where each point's σ_z comes from.
 #[derive(Clone, Copy, Debug)]
 pub enum DepthSigma<'a> {
-    /// Per pixel, e.g. from [`crate::uncertainty::depth_sigma`]; pixels with a non-finite or
+    /// Per pixel, e.g. from [`crate::depth_sigma::depth_sigma`]; pixels with a non-finite or
     /// non-positive σ_z carry no information and are skipped.
     PerPixel(&'a Image<f32>),
     /// The same σ_z (metres) for every pixel: an unweighted refinement.

@@ -14,7 +14,7 @@ pub mod image;
 pub mod io;
 pub mod mesh;
 pub mod parts;
-pub mod pose_error;
+pub mod pose_deviation;
 pub mod sampling;
 pub mod sdf;
 pub mod se3;

@@ -1,5 +1,5 @@
 //! Proper symmetry groups of rigid parts: which object-frame rotations leave the part looking
-//! the same. Pose errors are minimised over this group (see [`crate::pose_error`]).
+//! the same. Pose errors are minimised over this group (see [`crate::pose_deviation`]).
 //!
 //! Every element is a rotation about the object frame's origin, so the origin must lie on all
 //! symmetry axes (true for the five parts; for a user mesh, its frame's axes are used).

@@ -19,7 +19,7 @@ use glint_estimation::icp::{IcpConfig, IcpMethod, IcpModel, refine_icp};
 use glint_estimation::points::DepthPoint;
 use glint_estimation::refine::{SdfRefineConfig, refine_sdf};
 use glint_geometry::parts::Part;
-use glint_geometry::pose_error::{PoseError, pose_error};
+use glint_geometry::pose_deviation::{PoseDeviation, pose_deviation};
 use glint_geometry::sampling::{SurfaceSample, surface_samples};
 use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
@@ -125,8 +125,8 @@ struct Row {
     /// ICP: points × (iterations + the final inlier pass)).
     point_evaluations: usize,
     time_s: f64,
-    initial: PoseError,
-    error: PoseError,
+    initial: PoseDeviation,
+    error: PoseDeviation,
     status: String,
 }
 
@@ -211,7 +211,7 @@ pub fn run(args: &RefineBenchArgs) -> anyhow::Result<()> {
                 let problem = make_problem(part, &mesh, &sdf, n_points, views, args, seed)?;
                 let points_w: Vec<Point3<f64>> = problem.points.iter().map(|p| p.p_w).collect();
                 let score = |t_o_w: &Isometry3<f64>| {
-                    pose_error(
+                    pose_deviation(
                         &t_o_w.inverse(),
                         &problem.t_o_w_gt.inverse(),
                         &part.symmetry(),

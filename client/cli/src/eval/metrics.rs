@@ -2,7 +2,7 @@
 //! NEES, detection rates. Evaluation only: these read ground truth.
 
 use glint_geometry::Symmetry;
-use glint_geometry::pose_error::{CorrectThreshold, pose_error};
+use glint_geometry::pose_deviation::{CorrectThreshold, pose_deviation};
 use glint_geometry::se3;
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3, Vector6};
 use rand::Rng;
@@ -57,7 +57,8 @@ impl InitialPoseNoise {
                 Translation3::from(t_c_o_gt.translation.vector + dt),
                 UnitQuaternion::from_scaled_axis(omega) * t_c_o_gt.rotation,
             );
-            if pose_error(&candidate, t_c_o_gt, symmetry).is_correct(&CorrectThreshold::MM30_DEG30)
+            if pose_deviation(&candidate, t_c_o_gt, symmetry)
+                .is_correct(&CorrectThreshold::MM30_DEG30)
             {
                 return candidate;
             }
@@ -180,7 +181,7 @@ mod tests {
         let mut sum_sq = Vector3::zeros();
         for _ in 0..n {
             let p = noise.draw(&gt, &Symmetry::none(), &mut rng);
-            let e = pose_error(&p, &gt, &Symmetry::none());
+            let e = pose_deviation(&p, &gt, &Symmetry::none());
             assert!(e.is_correct(&CorrectThreshold::MM30_DEG30));
             let d = p.translation.vector - gt.translation.vector;
             sum_sq += d.component_mul(&d);

@@ -12,7 +12,7 @@ use glint_estimation::icp::{IcpConfig, IcpMethod, IcpModel, refine_icp};
 use glint_estimation::points::DepthPoint;
 use glint_estimation::refine::{SdfRefineConfig, refine_sdf};
 use glint_geometry::io::{read_mesh, write_file_atomically};
-use glint_geometry::pose_error::pose_error;
+use glint_geometry::pose_deviation::pose_deviation;
 use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use glint_geometry::{LengthUnit, Part, Symmetry};
 use nalgebra::{Isometry3, Point3};
@@ -229,7 +229,7 @@ fn run_trial(
     let points = trial_points(trial, scene);
     let outcome = |method, t_o_w: Isometry3<f64>, iterations, time_ms, status: String, n| {
         let t_c_o = t_c_w * t_o_w.inverse();
-        let e = pose_error(&t_c_o, &trial.t_c_o_gt, symmetry);
+        let e = pose_deviation(&t_c_o, &trial.t_c_o_gt, symmetry);
         Outcome {
             method,
             t_c_o,

@@ -11,8 +11,8 @@ use glint_camera::dataset::bop::{BopSceneReader, BopSceneWriter, MaskKind, write
 use glint_camera::dataset::rig_file::{read_rig_json, write_rig_json};
 use glint_camera::dataset::{PatternImage, StereoSide};
 use glint_camera::views;
+use glint_estimation::depth_sigma::{NoiseModel, depth_sigma};
 use glint_estimation::points::{DepthPoint, DepthSigma, interior_mask, object_points};
-use glint_estimation::uncertainty::{NoiseModel, depth_sigma};
 use glint_geometry::image::{Image, normalised_intensity};
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::{Symmetry, TriMesh};

@@ -10,7 +10,7 @@ use glint_calibration::plot::{FONT, padded_range, png};
 use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
 use glint_camera::capture::{CaptureConfig, MockSliCamera, StereoCapture};
 use glint_camera::{materials, views};
-use glint_estimation::uncertainty::{NoiseModel, depth_sigma};
+use glint_estimation::depth_sigma::{NoiseModel, depth_sigma};
 use glint_geometry::Part;
 use glint_geometry::image::normalised_intensity;
 use glint_geometry::io::write_file_atomically;

@@ -1,5 +1,5 @@
 use super::*;
-use glint_geometry::pose_error::pose_error;
+use glint_geometry::pose_deviation::pose_deviation;
 use glint_geometry::{Part, Symmetry};
 use rand::{Rng, SeedableRng};
 
@@ -67,7 +67,7 @@ fn point_to_point_recovers_a_small_perturbation_exactly_on_the_model_samples() {
             ..IcpConfig::default()
         };
         let result = refine_icp(&model, &points_w, &init, &config).unwrap();
-        let err = pose_error(&result.t_o_w.inverse(), &t_w_o, &Symmetry::none());
+        let err = pose_deviation(&result.t_o_w.inverse(), &t_w_o, &Symmetry::none());
         assert!(result.converged, "{part:?}: {result:?}");
         assert!(
             err.translation_m < 1e-9 && err.rotation_rad < 1e-9,
@@ -101,7 +101,7 @@ fn both_metrics_recover_a_perturbation_within_the_sample_spacing_on_independent_
                 ..IcpConfig::with_method(method)
             };
             let result = refine_icp(&model, &points_w, &init, &config).unwrap();
-            let err = pose_error(&result.t_o_w.inverse(), &t_w_o, &part.symmetry());
+            let err = pose_deviation(&result.t_o_w.inverse(), &t_w_o, &part.symmetry());
             let bound_m = match method {
                 IcpMethod::PointToPoint => s / 2.0,
                 IcpMethod::PointToPlane => 3.0 * s / (n_points as f64).sqrt(),
@@ -153,7 +153,7 @@ fn outliers_beyond_the_correspondence_distance_change_nothing() {
         // The clutter never pairs, so the sums are the same up to summation order.
         assert_eq!(a.inliers, b.inliers, "{method:?}");
         assert_eq!(a.iterations, b.iterations, "{method:?}");
-        let e = pose_error(&a.t_o_w, &b.t_o_w, &Symmetry::none());
+        let e = pose_deviation(&a.t_o_w, &b.t_o_w, &Symmetry::none());
         assert!(e.translation_m < 1e-12 && e.rotation_rad < 1e-12, "{e:?}");
     }
 }
@@ -174,7 +174,7 @@ fn non_finite_points_are_skipped_and_counted() {
     let b = refine_icp(&model, &holey, &init, &config).unwrap();
     assert_eq!((a.non_finite_skipped, b.non_finite_skipped), (0, 2));
     assert_eq!(a.inliers, b.inliers);
-    let e = pose_error(&a.t_o_w, &b.t_o_w, &Symmetry::none());
+    let e = pose_deviation(&a.t_o_w, &b.t_o_w, &Symmetry::none());
     assert!(e.translation_m < 1e-12 && e.rotation_rad < 1e-12, "{e:?}");
 }
 
@@ -209,7 +209,7 @@ fn kabsch_recovers_a_known_motion_of_planar_points() {
         sums.add(&q, &(motion * Point3::from(q)), &Vector3::z(), 0.0);
     }
     let step = kabsch_step(&sums).unwrap();
-    let e = pose_error(&step, &motion, &Symmetry::none());
+    let e = pose_deviation(&step, &motion, &Symmetry::none());
     assert!(e.translation_m < 1e-12 && e.rotation_rad < 1e-12, "{e:?}");
 }
 

@@ -6,7 +6,7 @@ use crate::symmetry::Symmetry;
 
 /// Translation and rotation error of an estimated pose against ground truth.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PoseError {
+pub struct PoseDeviation {
     /// Distance between the estimated and true object origins, metres.
     pub translation_m: f64,
     /// Smallest rotation angle between the estimate and any symmetric equivalent of the truth,
@@ -14,7 +14,7 @@ pub struct PoseError {
     pub rotation_rad: f64,
 }
 
-impl PoseError {
+impl PoseDeviation {
     pub fn translation_mm(&self) -> f64 {
         self.translation_m * 1e3
     }
@@ -65,11 +65,11 @@ impl CorrectThreshold {
 /// `a`, the minimum over all `Rot(a, θ)` of `∠(M Rot(a, θ))` is the angle between `a` and `M a`
 /// (every rotation taking `a` to `M a` turns by at least that angle, and one turns by exactly
 /// that), so no sampling is needed.
-pub fn pose_error(
+pub fn pose_deviation(
     t_c_o_est: &Isometry3<f64>,
     t_c_o_gt: &Isometry3<f64>,
     symmetry: &Symmetry,
-) -> PoseError {
+) -> PoseDeviation {
     let translation_m = (t_c_o_est.translation.vector - t_c_o_gt.translation.vector).norm();
     let r_est_inv_gt: UnitQuaternion<f64> = t_c_o_est.rotation.inverse() * t_c_o_gt.rotation;
     let rotation_rad = symmetry
@@ -83,7 +83,7 @@ pub fn pose_error(
             }
         })
         .fold(f64::INFINITY, f64::min);
-    PoseError {
+    PoseDeviation {
         translation_m,
         rotation_rad,
     }
@@ -108,7 +108,7 @@ mod tests {
         let gt = pose(Vector3::new(1.0, 2.0, 3.0), 0.7, [0.1, 0.0, 0.6]);
         let est = pose(Vector3::x(), 0.03, [0.0, 0.0, 0.0]) * gt;
         let est = Isometry3::from_parts(Translation3::new(0.1036, 0.0048, 0.6), est.rotation);
-        let e = pose_error(&est, &gt, &Symmetry::none());
+        let e = pose_deviation(&est, &gt, &Symmetry::none());
         assert!((e.rotation_rad - 0.03).abs() < 1e-12);
         assert!((e.translation_m - 0.006).abs() < 1e-12);
         assert!(!e.is_correct(&CorrectThreshold::MM5_DEG5)); // 6 mm is over 5 mm
@@ -123,17 +123,17 @@ mod tests {
         let est = gt
             * pose(Vector3::z(), PI / 3.0, [0.0; 3])
             * pose(Vector3::x(), 1f64.to_radians(), [0.0; 3]);
-        let e = pose_error(&est, &gt, &sixfold);
+        let e = pose_deviation(&est, &gt, &sixfold);
         assert!(
             (e.rotation_deg() - 1.0).abs() < 1e-9,
             "{}",
             e.rotation_deg()
         );
         // Without the symmetry the same estimate is ~60° off.
-        assert!(pose_error(&est, &gt, &Symmetry::none()).rotation_deg() > 59.0);
+        assert!(pose_deviation(&est, &gt, &Symmetry::none()).rotation_deg() > 59.0);
         // 30° about z is as far from 6-fold symmetric as it gets.
         let half = gt * pose(Vector3::z(), PI / 6.0, [0.0; 3]);
-        assert!((pose_error(&half, &gt, &sixfold).rotation_deg() - 30.0).abs() < 1e-9);
+        assert!((pose_deviation(&half, &gt, &sixfold).rotation_deg() - 30.0).abs() < 1e-9);
     }
 
     #[test]
@@ -141,11 +141,11 @@ mod tests {
         let gt = pose(Vector3::new(1.0, 1.0, 0.0), 0.4, [0.0, 0.0, 0.5]);
         let spin = Symmetry::continuous(Axis::Z);
         let est = gt * pose(Vector3::z(), 2.3, [0.0; 3]);
-        assert!(pose_error(&est, &gt, &spin).rotation_rad < 1e-9);
+        assert!(pose_deviation(&est, &gt, &spin).rotation_rad < 1e-9);
         // A 3° tilt of the axis stays 3° whatever the spin.
         let tilted = gt
             * pose(Vector3::z(), 1.2, [0.0; 3])
             * pose(Vector3::y(), 3f64.to_radians(), [0.0; 3]);
-        assert!((pose_error(&tilted, &gt, &spin).rotation_deg() - 3.0).abs() < 1e-9);
+        assert!((pose_deviation(&tilted, &gt, &spin).rotation_deg() - 3.0).abs() < 1e-9);
     }
 }

@@ -20,7 +20,7 @@ use glint_geometry::image::{DepthMap, Image, SummedAreaTable};
 
 /// Why an uncertainty could not be computed.
 #[derive(Debug, thiserror::Error, PartialEq)]
-pub enum UncertaintyError {
+pub enum DepthSigmaError {
     #[error("{what}: images are {a_w}×{a_h} and {b_w}×{b_h} px; they must be the same size")]
     SizeMismatch {
         what: &'static str,
@@ -76,7 +76,7 @@ impl NoiseModel {
         a: &Image<f32>,
         b: &Image<f32>,
         max_dn: u16,
-    ) -> Result<Self, UncertaintyError> {
+    ) -> Result<Self, DepthSigmaError> {
         check_same_size("noise model shots", a, b)?;
         let n = Self::BINS;
         let mut samples: Vec<Vec<f64>> = vec![Vec::new(); n];
@@ -99,11 +99,11 @@ impl NoiseModel {
             used += 1;
         }
         if used < Self::MIN_BIN_SAMPLES {
-            return Err(UncertaintyError::TooFewNoiseSamples { pixels: used });
+            return Err(DepthSigmaError::TooFewNoiseSamples { pixels: used });
         }
         let rms = (sum_sq / used as f64).sqrt();
         if rms > 0.2 {
-            return Err(UncertaintyError::ShotsDiffer { rms });
+            return Err(DepthSigmaError::ShotsDiffer { rms });
         }
         let floor_variance = dn * dn / 12.0;
         let mut estimate: Vec<Option<f64>> = samples
@@ -121,7 +121,7 @@ impl NoiseModel {
         // Empty bins take the nearest filled bin's value (constant extrapolation).
         let filled: Vec<usize> = (0..n).filter(|&k| estimate[k].is_some()).collect();
         if filled.is_empty() {
-            return Err(UncertaintyError::TooFewNoiseSamples { pixels: used });
+            return Err(DepthSigmaError::TooFewNoiseSamples { pixels: used });
         }
         for k in 0..n {
             if estimate[k].is_none() {
@@ -158,9 +158,9 @@ fn check_same_size<T: Copy, U: Copy>(
     what: &'static str,
     a: &Image<T>,
     b: &Image<U>,
-) -> Result<(), UncertaintyError> {
+) -> Result<(), DepthSigmaError> {
     if a.width() != b.width() || a.height() != b.height() {
-        return Err(UncertaintyError::SizeMismatch {
+        return Err(DepthSigmaError::SizeMismatch {
             what,
             a_w: a.width(),
             a_h: a.height(),
@@ -196,7 +196,7 @@ pub fn depth_sigma(
     rig: &StereoRig,
     noise: &NoiseModel,
     window_radius_px: u32,
-) -> Result<Image<f32>, UncertaintyError> {
+) -> Result<Image<f32>, DepthSigmaError> {
     check_same_size("left and right images", left, right)?;
     check_same_size("left image and depth map", left, &depth.depth_m)?;
     let info_left = disparity_information_table(left, noise);
@@ -286,12 +286,12 @@ mod tests {
         let b = Image::filled(10, 11, 0.5f32).unwrap();
         assert!(matches!(
             NoiseModel::fit_from_pair(&a, &b, 255),
-            Err(UncertaintyError::SizeMismatch { .. })
+            Err(DepthSigmaError::SizeMismatch { .. })
         ));
         let saturated = Image::filled(100, 100, 1.0f32).unwrap();
         assert!(matches!(
             NoiseModel::fit_from_pair(&saturated, &saturated, 255),
-            Err(UncertaintyError::TooFewNoiseSamples { .. })
+            Err(DepthSigmaError::TooFewNoiseSamples { .. })
         ));
         let moved = Image::new(
             100,
@@ -307,7 +307,7 @@ mod tests {
         .unwrap();
         assert!(matches!(
             NoiseModel::fit_from_pair(&moved, &other, 255),
-            Err(UncertaintyError::ShotsDiffer { .. })
+            Err(DepthSigmaError::ShotsDiffer { .. })
         ));
     }
 
@@ -428,7 +428,7 @@ mod tests {
         let noise = NoiseModel::constant(1e-4);
         assert!(matches!(
             depth_sigma(&a, &b, &depth, &rig(), &noise, 2),
-            Err(UncertaintyError::SizeMismatch {
+            Err(DepthSigmaError::SizeMismatch {
                 what: "left and right images",
                 ..
             })
