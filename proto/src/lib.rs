@@ -1,8 +1,10 @@
 //! Glint's gRPC contract: the code generated from `proto/glint/v1/*.proto` and validated
 //! conversions between its messages and Glint's core types.
 //!
-//! - [`v1`]: the generated prost messages (and, once services are declared, tonic clients and
-//!   servers) of package `glint.v1`.
+//! - [`v1`]: the generated prost messages, tonic clients and servers of package `glint.v1`:
+//!   `common.proto` (poses, cameras, images, depth, chunked arrays, 6×6 matrices) and one file
+//!   per service — `camera.proto` (`CameraService`, `MockCameraService`), `calibration.proto`,
+//!   `uncertainty.proto` (the render worker), `estimation.proto`, `orchestrator.proto`.
 //! - [`convert`]: `TryFrom<message>` for the core types of `glint-geometry` (validating; every
 //!   rejection is a [`ConversionError`] naming the offending field) and `From<core>` for the
 //!   messages. A [`ConversionError`] converts into `tonic::Status::invalid_argument`.
@@ -25,3 +27,32 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
     include_bytes!(concat!(env!("OUT_DIR"), "/glint_descriptor.bin"));
 
 pub use convert::ConversionError;
+
+#[cfg(test)]
+mod tests {
+    use prost::Message;
+
+    #[test]
+    fn the_descriptor_set_declares_every_service() {
+        let fds = prost_types::FileDescriptorSet::decode(super::FILE_DESCRIPTOR_SET)
+            .expect("build.rs encodes a valid descriptor set");
+        let mut services: Vec<String> = fds
+            .file
+            .iter()
+            .filter(|f| f.package() == "glint.v1")
+            .flat_map(|f| f.service.iter().map(|s| s.name().to_owned()))
+            .collect();
+        services.sort();
+        assert_eq!(
+            services,
+            [
+                "CalibrationService",
+                "CameraService",
+                "EstimationService",
+                "MockCameraService",
+                "OrchestratorService",
+                "UncertaintyService"
+            ]
+        );
+    }
+}
