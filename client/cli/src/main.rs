@@ -10,6 +10,7 @@ mod eval;
 mod mesh_cmd;
 mod mitsuba_export;
 mod preview;
+mod serve_cmd;
 
 use std::path::PathBuf;
 
@@ -44,6 +45,10 @@ enum Command {
     /// Benchmarks that print tables (and write CSV with --csv).
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Runs a stage's gRPC server (with health and reflection) until SIGTERM or Ctrl-C.
+    Serve(serve_cmd::ServeArgs),
+    /// Exits 0 only when the server (or --service) answers SERVING: for container probes.
+    Healthcheck(serve_cmd::HealthcheckArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -64,6 +69,8 @@ fn main() -> std::process::ExitCode {
         Some(Command::Mesh(cmd)) => mesh_cmd::run(cmd),
         Some(Command::Bench(cmd)) => bench::run(cmd),
         Some(Command::Calibrate(cmd)) => calibrate_cmd::run(cmd),
+        Some(Command::Serve(args)) => serve_cmd::serve(&args),
+        Some(Command::Healthcheck(args)) => serve_cmd::healthcheck(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -12,3 +12,5 @@ pub mod bsdf_fit;
 pub mod material_file;
 pub mod material_map;
 pub mod response;
+#[cfg(feature = "server")]
+pub mod server;
