@@ -295,7 +295,7 @@ fn bench_render(part: Part, instances: u32, spp: u32) -> anyhow::Result<()> {
             config: CaptureConfig::for_rig(&rig)?,
         };
         let start = Instant::now();
-        let capture = camera.capture(&t_w_c, 1)?;
+        let (capture, _truth) = camera.capture(&t_w_c, 1)?;
         println!(
             "| {w}×{h} (coverage of the image: {:.2}) | {:.2} |",
             capture.depth.coverage(),

@@ -58,11 +58,33 @@ pub struct StereoCapture {
     pub depth: DepthMap,
     /// Why each left pixel has or lacks depth.
     pub match_status: Image<MatchStatus>,
-    /// Ground truth, for evaluation only: the left camera's radiance (with the capture's light
-    /// transport), the first surface's depth and instance label.
-    pub gt_left_radiance: Image<f32>,
-    pub gt_depth_m: Image<f32>,
-    pub gt_label: Image<u16>,
+}
+
+/// What the simulator knows about a capture and a real camera would not: ground truth, for
+/// evaluation only. The mock camera returns it beside the measurement ([`StereoCapture`],
+/// [`crate::exposure::ExposureStack`]) as a separate type, so that estimators and predictors,
+/// which take the measurement, cannot read it.
+#[derive(Clone, Debug)]
+pub struct CaptureTruth {
+    /// The left camera's radiance with the capture's light transport, W·sr⁻¹·m⁻² (under the
+    /// first shot's pattern for a pattern capture, the white pattern for an exposure stack).
+    pub left_radiance: Image<f32>,
+    /// Depth z of the first surface through each left pixel centre, metres; NaN where nothing
+    /// is hit.
+    pub depth_m: Image<f32>,
+    /// Instance label of that surface, 0 where nothing is hit.
+    pub label: Image<u16>,
+}
+
+impl CaptureTruth {
+    /// The truth of a left-camera render.
+    pub fn from_render(render: glint_render::integrator::RenderOutput) -> Self {
+        Self {
+            left_radiance: render.radiance,
+            depth_m: render.depth_m,
+            label: render.label,
+        }
+    }
 }
 
 /// Why a capture failed.
@@ -133,13 +155,14 @@ impl MockSliCamera<'_> {
         Ok((disparity_to_depth(&result, &self.rig.stereo), result.status))
     }
 
-    /// Captures the random-pattern stereo pair from left-camera pose `t_w_c` and matches it.
-    /// `seed` drives the sampling and the sensor noise.
+    /// Captures the random-pattern stereo pair from left-camera pose `t_w_c` and matches it;
+    /// the ground truth comes beside it, for evaluation only. `seed` drives the sampling and
+    /// the sensor noise.
     pub fn capture(
         &self,
         t_w_c: &Isometry3<f64>,
         seed: u64,
-    ) -> Result<StereoCapture, CaptureError> {
+    ) -> Result<(StereoCapture, CaptureTruth), CaptureError> {
         let renders = self.render_pair(t_w_c, self.pattern(), seed);
         self.capture_rendered(t_w_c, renders, seed)
     }
@@ -153,21 +176,19 @@ impl MockSliCamera<'_> {
         t_w_c: &Isometry3<f64>,
         [left_render, right_render]: [glint_render::integrator::RenderOutput; 2],
         seed: u64,
-    ) -> Result<StereoCapture, CaptureError> {
+    ) -> Result<(StereoCapture, CaptureTruth), CaptureError> {
         let sensor = &self.config.sensor;
         let left = sensor.read_out(&left_render.radiance, seed.wrapping_add(1));
         let right = sensor.read_out(&right_render.radiance, seed.wrapping_add(2));
         let (depth, match_status) = self.match_pair(&left, &right)?;
-        Ok(StereoCapture {
+        let capture = StereoCapture {
             t_w_c: *t_w_c,
             left,
             right,
             depth,
             match_status,
-            gt_left_radiance: left_render.radiance,
-            gt_depth_m: left_render.depth_m,
-            gt_label: left_render.label,
-        })
+        };
+        Ok((capture, CaptureTruth::from_render(left_render)))
     }
 }
 
@@ -231,16 +252,17 @@ impl DepthQuality {
     }
 }
 
-/// Compares `capture.depth` with its ground truth on the pixels of instance `label`, or on
-/// every surface pixel when `label` is `None`. The RMSE excludes the 5 mm outliers, which are
-/// counted separately.
+/// Compares `capture.depth` with its ground truth `truth` on the pixels of instance `label`,
+/// or on every surface pixel when `label` is `None`. The RMSE excludes the 5 mm outliers,
+/// which are counted separately.
 pub fn depth_quality(
     capture: &StereoCapture,
+    truth: &CaptureTruth,
     rig: &SliRig,
     window_radius_px: u32,
     label: Option<u16>,
 ) -> DepthQuality {
-    let (w, h) = (capture.gt_depth_m.width(), capture.gt_depth_m.height());
+    let (w, h) = (truth.depth_m.width(), truth.depth_m.height());
     let r = window_radius_px as f64;
     let mut quality = DepthQuality {
         eligible: 0,
@@ -252,8 +274,8 @@ pub fn depth_quality(
     let mut inliers = 0usize;
     for v in 0..h {
         for u in 0..w {
-            let z_true = capture.gt_depth_m.get(u, v).unwrap_or(f32::NAN) as f64;
-            let l = capture.gt_label.get(u, v).unwrap_or(0);
+            let z_true = truth.depth_m.get(u, v).unwrap_or(f32::NAN) as f64;
+            let l = truth.label.get(u, v).unwrap_or(0);
             if !z_true.is_finite() || label.is_some_and(|want| want != l) {
                 continue;
             }
@@ -330,9 +352,10 @@ mod tests {
             scene: &scene,
             config,
         };
-        let capture = camera.capture(&t_w_c, 7).unwrap();
+        let (capture, truth) = camera.capture(&t_w_c, 7).unwrap();
         let q = depth_quality(
             &capture,
+            &truth,
             &rig,
             camera.config.matcher.window_radius_px,
             Some(1),

@@ -134,7 +134,7 @@ fn generate(
     let bar = crate::progress::bar(view_poses.len() as u64, &format!("{} {seed}", object.name));
     for (k, t_w_c) in view_poses.iter().enumerate() {
         let capture_seed = seed.wrapping_mul(1000).wrapping_add(k as u64);
-        let capture = camera.capture(t_w_c, capture_seed)?;
+        let (capture, truth) = camera.capture(t_w_c, capture_seed)?;
         crate::capture_cmd::write_bop_image(&mut bop, k as u32, &capture, &camera, &poses, OBJ_ID)?;
         if k == 0 {
             // Two more read-outs of this view's left pattern radiance: what a user does to
@@ -143,7 +143,7 @@ fn generate(
                 let dn = camera
                     .config
                     .sensor
-                    .read_out(&capture.gt_left_radiance, capture_seed ^ s);
+                    .read_out(&truth.left_radiance, capture_seed ^ s);
                 crate::capture_cmd::write_gray(
                     &noise_shot_path(&glint_dir, shot),
                     &dn,

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use glint_calibration::plot::{FONT, padded_range, png};
 use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
-use glint_camera::capture::{CaptureConfig, MockSliCamera, StereoCapture};
+use glint_camera::capture::{CaptureConfig, CaptureTruth, MockSliCamera, StereoCapture};
 use glint_camera::{materials, views};
 use glint_estimation::depth_sigma::{NoiseModel, depth_sigma};
 use glint_geometry::Part;
@@ -102,12 +102,12 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
 
     let bar = crate::progress::bar(args.repeats as u64, "captures");
     let mut captures: Vec<StereoCapture> = Vec::new();
+    let mut truths: Vec<CaptureTruth> = Vec::new();
     for r in 0..args.repeats {
-        captures.push(camera.capture_rendered(
-            &t_w_c,
-            renders.clone(),
-            args.seed ^ (1000 + r as u64),
-        )?);
+        let (capture, truth) =
+            camera.capture_rendered(&t_w_c, renders.clone(), args.seed ^ (1000 + r as u64))?;
+        captures.push(capture);
+        truths.push(truth);
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -126,7 +126,7 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
     let mut depths = Vec::with_capacity(captures.len());
     for v in 0..h {
         for u in 0..w {
-            let label = first.gt_label.get(u, v).unwrap_or(0);
+            let label = truths[0].label.get(u, v).unwrap_or(0);
             if label == 0 || label as u32 > args.instances {
                 continue; // parts only
             }
