@@ -37,7 +37,7 @@ impl Pattern {
 
     /// Transmittance at continuous projector pixel coordinates (0 outside the image).
     #[inline]
-    fn transmittance(&self, uv: Point2<f64>, intrinsics: &PinholeIntrinsics) -> f32 {
+    pub fn transmittance(&self, uv: Point2<f64>, intrinsics: &PinholeIntrinsics) -> f32 {
         let (w, h) = (intrinsics.width_px as f64, intrinsics.height_px as f64);
         if !(uv.x >= 0.0 && uv.x < w && uv.y >= 0.0 && uv.y < h) {
             return 0.0;
@@ -93,17 +93,25 @@ impl Projector {
         let centre = self.t_w_p.translation.vector.cast::<f32>();
         let to_light = Vec3A::new(centre.x, centre.y, centre.z) - p_w;
         let distance_m = to_light.length();
-        let p_p = self.t_w_p.inverse_transform_point(&Point3::new(
-            p_w.x as f64,
-            p_w.y as f64,
-            p_w.z as f64,
-        ));
-        let uv = self.intrinsics.project(&p_p)?;
+        let uv = self.pattern_coordinates(p_w)?;
         let transmittance = self.pattern.transmittance(uv, &self.intrinsics);
         (transmittance > 0.0 && distance_m > 0.0).then(|| Illumination {
             direction: to_light / distance_m,
             distance_m,
             intensity_w_per_sr: self.intensity_w_per_sr * transmittance,
         })
+    }
+
+    /// Where world point `p_w` falls in the projector image: continuous pixel coordinates
+    /// (pixel centres at +0.5), `None` behind the projector. Points outside the image get
+    /// coordinates outside `0..width × 0..height` (transmittance 0).
+    #[inline]
+    pub fn pattern_coordinates(&self, p_w: Vec3A) -> Option<Point2<f64>> {
+        let p_p = self.t_w_p.inverse_transform_point(&Point3::new(
+            p_w.x as f64,
+            p_w.y as f64,
+            p_w.z as f64,
+        ));
+        self.intrinsics.project(&p_p)
     }
 }
