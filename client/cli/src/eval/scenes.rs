@@ -253,7 +253,14 @@ pub fn load_scene(
         let depth = reader.depth(im_id)?;
         let (left, _) = pattern_as_normalised(reader.pattern(im_id, StereoSide::Left)?);
         let (right, _) = pattern_as_normalised(reader.pattern(im_id, StereoSide::Right)?);
-        let sigma_image = depth_sigma(&left, &right, &depth, &rig.stereo, &noise, window_radius)?;
+        let sigma_image = depth_sigma(
+            std::slice::from_ref(&left),
+            std::slice::from_ref(&right),
+            &depth,
+            &rig.stereo,
+            &noise,
+            window_radius,
+        )?;
         let gts = reader.gt(im_id).unwrap_or(&[]).to_vec();
         let infos = reader.gt_info(im_id).map(|i| i.to_vec());
         let mut objects = Vec::new();

@@ -92,12 +92,12 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
         bin.centre(),
         rig.stereo.baseline_m,
     )[0];
-    let renders = camera.render_pair(&t_w_c, camera.pattern(), args.seed);
+    let renders = camera.render_shots(&t_w_c, args.seed);
     let sensor = &camera.config.sensor;
     let max_dn = sensor.max_dn();
 
     // The noise model from two extra shots, as a user would measure it.
-    let shot = |s: u64| normalised_intensity(&sensor.read_out(&renders[0].radiance, s), max_dn);
+    let shot = |s: u64| normalised_intensity(&sensor.read_out(&renders.left[0], s), max_dn);
     let noise = NoiseModel::fit_from_pair(&shot(0xA1), &shot(0xB2), max_dn)?;
 
     let bar = crate::progress::bar(args.repeats as u64, "captures");
@@ -105,7 +105,7 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
     let mut truths: Vec<CaptureTruth> = Vec::new();
     for r in 0..args.repeats {
         let (capture, truth) =
-            camera.capture_rendered(&t_w_c, renders.clone(), args.seed ^ (1000 + r as u64))?;
+            camera.capture_rendered(&t_w_c, &renders, args.seed ^ (1000 + r as u64))?;
         captures.push(capture);
         truths.push(truth);
         bar.inc(1);
@@ -114,8 +114,16 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
     // σ_z predicted from the first capture alone, as the refiner would.
     let first = &captures[0];
     let predicted = depth_sigma(
-        &normalised_intensity(&first.left, max_dn),
-        &normalised_intensity(&first.right, max_dn),
+        &first
+            .shot_images(0)
+            .into_iter()
+            .map(|dn| normalised_intensity(dn, max_dn))
+            .collect::<Vec<_>>(),
+        &first
+            .shot_images(1)
+            .into_iter()
+            .map(|dn| normalised_intensity(dn, max_dn))
+            .collect::<Vec<_>>(),
         &first.depth,
         &rig.stereo,
         &noise,
