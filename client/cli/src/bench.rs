@@ -116,7 +116,7 @@ fn bench_sdf(
         padding_m: padding_mm * 1e-3,
     };
     let threads = rayon::current_num_threads();
-    let bar = crate::progress::bar(Part::ALL.len() as u64, "bench sdf");
+    let bar = glint_eval::progress::bar(Part::ALL.len() as u64, "bench sdf");
     let mut rows = Vec::new();
     for part in Part::ALL {
         bar.set_message(part.name());
@@ -216,14 +216,24 @@ fn bench_scene(
     instances: u32,
     rig: &glint_render::rig::SliRig,
 ) -> anyhow::Result<BenchScene> {
-    use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
+    use glint_camera::setup::{BinSetup, BinSetupSpec};
     use glint_camera::{materials, views};
-    let bin = BinSpec::default();
     let mesh = part.mesh();
-    let poses = drop_parts(&mesh, instances as usize, &bin, 1)?;
     let part_material = materials::ground_truth(part);
-    let scene = bin_scene(&mesh, &poses, part_material, &bin)?;
-    let t_w_c = views::spherical_cap(1, 0.6, 0.0, bin.centre(), rig.stereo.baseline_m)[0];
+    let setup = BinSetup::new(
+        &mesh,
+        part_material,
+        &BinSetupSpec {
+            instances,
+            seed: 1,
+            width_px: rig.stereo.intrinsics.width_px,
+            height_px: rig.stereo.intrinsics.height_px,
+            samples_per_pixel: 4,
+        },
+    )?;
+    // Straight down from 0.6 m: the bench's fixed view, not the capture cap's.
+    let t_w_c = views::spherical_cap(1, 0.6, 0.0, setup.bin.centre(), rig.stereo.baseline_m)[0];
+    let (bin, poses, scene) = (setup.bin, setup.poses, setup.scene);
     Ok(BenchScene {
         bin,
         mesh,

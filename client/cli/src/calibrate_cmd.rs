@@ -21,7 +21,7 @@ use glint_render::integrator::{LightTransport, path_pixel};
 use glint_render::projector::Pattern;
 use glint_render::sensor::ResponseCurve;
 
-use crate::calibrate_scene::{self, CalibrationScene};
+use glint_camera::dataset::calibration_scene::{self, CalibrationScene};
 use rayon::prelude::*;
 
 #[derive(clap::Subcommand)]
@@ -394,7 +394,7 @@ fn fit_views(
 }
 
 fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
-    let loaded = calibrate_scene::load(&args.scene)?;
+    let loaded = calibration_scene::load(&args.scene)?;
     check_views(&loaded, &args.views)?;
     let table = ResponseTable::load(&args.response)?;
     let rendering = rendering_of(
@@ -451,7 +451,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         final_min_indirect_roughness: Some(args.final_min_indirect_roughness),
         ..FitConfig::default()
     };
-    let bar = crate::progress::bar((args.iterations * args.start.len()) as u64, "BSDF fit");
+    let bar = glint_eval::progress::bar((args.iterations * args.start.len()) as u64, "BSDF fit");
     let StartFits { mut fits, best } =
         problem.fit_from_starts(&config, &args.start, |_, _| bar.inc(1))?;
     bar.finish_and_clear();
@@ -682,7 +682,7 @@ fn params_in(value: &serde_json::Value, path: &Path) -> anyhow::Result<Principle
 }
 
 fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
-    let loaded = calibrate_scene::load(&args.scene)?;
+    let loaded = calibration_scene::load(&args.scene)?;
     let material_json = read_json(&args.material)?;
     let fitted = params_in(&material_json, &args.material)?;
     let fitted_views: Vec<u32> = material_json

@@ -5,24 +5,21 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
 use glint_camera::capture::{
-    CaptureConfig, CaptureTruth, DepthQuality, MockSliCamera, StereoCapture, depth_quality,
+    CaptureTruth, DepthQuality, MockSliCamera, StereoCapture, depth_quality,
 };
-use glint_camera::dataset::bop::{
-    BopCamera, BopGt, BopGtInfo, BopSceneWriter, MaskKind, write_dataset_camera, write_models,
-};
+use glint_camera::dataset::bop::{BopCamera, BopSceneWriter, write_dataset_camera, write_models};
 use glint_camera::dataset::reference_file::{ReferenceSurface, write_reference_surface_json};
 use glint_camera::dataset::rig_file::{write_gt_sensor_json, write_rig_json};
-use glint_camera::dataset::{PatternImage, StereoSide, write_exposure_stack};
+use glint_camera::dataset::{write_exposure_stack, write_png_u8};
 use glint_camera::edge_errors::{EdgeBin, errors_by_edge_distance};
 use glint_camera::effects::missing_causes;
-use glint_camera::visibility::{InstanceVisibility, instance_visibility};
-use glint_camera::{materials, views};
-use glint_geometry::image::{DepthMap, Image};
+use glint_camera::materials;
+use glint_camera::record::{to_8bit, write_bop_annotations, write_bop_image};
+use glint_camera::setup::{BinSetup, BinSetupSpec, capture_seed};
+use glint_geometry::image::Image;
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::parts::Part;
-use glint_render::rig::SliRig;
 use image::ImageEncoder;
 use nalgebra::Isometry3;
 
@@ -103,50 +100,26 @@ pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
     }
 }
 
-/// Working distance of the views, metres, and the cap's half-angle, degrees (like ROBI's
-/// robot-arm views); every command that captures a bin uses these.
-pub(crate) const VIEW_DISTANCE_M: f64 = 0.5;
-pub(crate) const VIEW_CAP_DEG: f64 = 35.0;
-
 pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let rig = SliRig::ensenso_n35().resized(args.resolution.0, args.resolution.1)?;
-    let bin = BinSpec::default();
     let mesh = args.part.mesh();
-    let poses = drop_parts(&mesh, args.instances as usize, &bin, args.seed)?;
-    let shiny = bin_scene(&mesh, &poses, materials::ground_truth(args.part), &bin)?;
-    let matte = bin_scene(&mesh, &poses, materials::diffuse_twin(), &bin)?;
-    let config = CaptureConfig {
-        samples_per_pixel: args.spp,
-        ..CaptureConfig::for_rig(&rig)?
-    };
-    let radius = config.matcher.window_radius_px;
-    let cameras = [
-        (
-            "shiny",
-            MockSliCamera {
-                rig,
-                scene: &shiny,
-                config: config.clone(),
-            },
-        ),
-        (
-            "diffuse twin",
-            MockSliCamera {
-                rig,
-                scene: &matte,
-                config,
-            },
-        ),
-    ];
-    let views = views::spherical_cap(
-        args.views as usize,
-        VIEW_DISTANCE_M,
-        VIEW_CAP_DEG,
-        bin.centre(),
-        rig.stereo.baseline_m,
-    );
+    let shiny = BinSetup::new(
+        &mesh,
+        materials::ground_truth(args.part),
+        &BinSetupSpec {
+            instances: args.instances,
+            seed: args.seed,
+            width_px: args.resolution.0,
+            height_px: args.resolution.1,
+            samples_per_pixel: args.spp,
+        },
+    )?;
+    let matte = shiny.repainted(&mesh, materials::diffuse_twin())?;
+    let (rig, bin, poses) = (shiny.rig, shiny.bin, &shiny.poses);
+    let radius = shiny.config.matcher.window_radius_px;
+    let cameras = [("shiny", shiny.camera()), ("diffuse twin", matte.camera())];
+    let views = shiny.views(args.views as usize);
 
     let mut report = format!(
         "# glint capture: {} × {}, {} views, seed {}, {}×{} px, {} spp multi-path\n\n\
@@ -204,23 +177,15 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
         },
     )?;
     if let Some(ExposureTimes(exposures_s)) = &args.exposure_stack {
-        return run_exposure_stacks(
-            args,
-            &cameras[0].1,
-            &views,
-            &poses,
-            OBJ_ID,
-            bop,
-            exposures_s,
-        );
+        return run_exposure_stacks(args, &cameras[0].1, &views, poses, OBJ_ID, bop, exposures_s);
     }
-    let bar = crate::progress::bar(views.len() as u64, "capture");
+    let bar = glint_eval::progress::bar(views.len() as u64, "capture");
     let mut totals: [Vec<DepthQuality>; 2] = Default::default();
     let mut cause_totals = [0usize; 4];
     let part_labels: Vec<u16> = (1..=args.instances as u16).collect();
     let mut edge_totals: [Vec<EdgeBin>; 2] = Default::default();
     for (k, t_w_c) in views.iter().enumerate() {
-        let seed = args.seed.wrapping_mul(1000).wrapping_add(k as u64);
+        let seed = capture_seed(args.seed, k);
         let start = Instant::now();
         let (captures, truths): (Vec<StereoCapture>, Vec<CaptureTruth>) = cameras
             .iter()
@@ -256,7 +221,7 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
             k as u32,
             &captures[0],
             &cameras[0].1,
-            &poses,
+            poses,
             OBJ_ID,
         )?;
         for (totals, (capture, truth)) in edge_totals.iter_mut().zip(captures.iter().zip(&truths)) {
@@ -374,19 +339,8 @@ fn png_bytes(
     Ok(png)
 }
 
-pub(crate) fn write_gray(path: &Path, img: &Image<u16>, max_dn: u16) -> anyhow::Result<()> {
-    let bytes: Vec<u8> = img
-        .data()
-        .iter()
-        .map(|&d| (d as u32 * 255 / max_dn.max(1) as u32) as u8)
-        .collect();
-    let png = png_bytes(
-        &bytes,
-        img.width(),
-        img.height(),
-        image::ExtendedColorType::L8,
-    )?;
-    write_file_atomically(path, &png).with_context(|| format!("writing {}", path.display()))
+fn write_gray(path: &Path, img: &Image<u16>, max_dn: u16) -> anyhow::Result<()> {
+    write_png_u8(path, &to_8bit(img, max_dn)).with_context(|| format!("writing {}", path.display()))
 }
 
 /// Depth as colour (blue near → red far over the capture's true depth range), missing magenta,
@@ -428,87 +382,6 @@ fn write_depth(path: &Path, capture: &StereoCapture, truth: &CaptureTruth) -> an
     write_file_atomically(path, &png).with_context(|| format!("writing {}", path.display()))
 }
 
-/// One view as a BOP image: camera, depth, left/right patterns (8-bit), and the annotations of
-/// [`write_bop_annotations`].
-pub(crate) fn write_bop_image(
-    bop: &mut BopSceneWriter,
-    im_id: u32,
-    capture: &StereoCapture,
-    camera: &MockSliCamera<'_>,
-    poses: &[Isometry3<f64>],
-    obj_id: u32,
-) -> anyhow::Result<()> {
-    bop.write_depth(im_id, &capture.depth)?;
-    let max_dn = camera.config.sensor.max_dn();
-    let to_8bit = |img: &Image<u16>| {
-        let data = img
-            .data()
-            .iter()
-            .map(|&d| (d as u32 * 255 / max_dn.max(1) as u32) as u8)
-            .collect();
-        Image::new(img.width(), img.height(), data).expect("same size")
-    };
-    bop.write_pattern(
-        im_id,
-        StereoSide::Left,
-        &PatternImage::Bits8(to_8bit(&capture.left)),
-    )?;
-    bop.write_pattern(
-        im_id,
-        StereoSide::Right,
-        &PatternImage::Bits8(to_8bit(&capture.right)),
-    )?;
-    write_bop_annotations(
-        bop,
-        im_id,
-        &capture.t_w_c,
-        camera,
-        poses,
-        obj_id,
-        Some(&capture.depth),
-    )?;
-    Ok(())
-}
-
-/// A view's camera (intrinsics, world → camera) and, for every instance whose silhouette
-/// reaches the left image, its GT pose, amodal `mask/`, `mask_visib/` and GT info
-/// (`px_count_valid` from `depth` when given). Returns the instances written, GT index order.
-fn write_bop_annotations(
-    bop: &mut BopSceneWriter,
-    im_id: u32,
-    t_w_c: &Isometry3<f64>,
-    camera: &MockSliCamera<'_>,
-    poses: &[Isometry3<f64>],
-    obj_id: u32,
-    depth: Option<&DepthMap>,
-) -> anyhow::Result<Vec<InstanceVisibility>> {
-    let t_c_w = t_w_c.inverse();
-    bop.set_camera(im_id, &camera.rig.stereo.intrinsics, Some(&t_c_w))?;
-    let [left, _] = camera.rig.cameras(t_w_c);
-    let labels: Vec<u16> = (1..=poses.len() as u16).collect();
-    let seen: Vec<InstanceVisibility> = instance_visibility(camera.scene, &left, &labels)
-        .into_iter()
-        .filter(|v| v.px_count_all > 0)
-        .collect();
-    let mut gts = Vec::with_capacity(seen.len());
-    let mut infos = Vec::with_capacity(seen.len());
-    for (gt_index, v) in seen.iter().enumerate() {
-        bop.write_mask(im_id, gt_index, MaskKind::Full, &v.mask_all)?;
-        bop.write_mask(im_id, gt_index, MaskKind::Visible, &v.mask_visib)?;
-        gts.push(BopGt {
-            obj_id,
-            t_c_o: t_c_w * poses[v.label as usize - 1],
-        });
-        infos.push(
-            BopGtInfo::from_masks(&v.mask_all, &v.mask_visib, depth)
-                .map_err(|problem| anyhow::anyhow!("GT info of image {im_id}: {problem}"))?,
-        );
-    }
-    bop.set_gt(im_id, &gts);
-    bop.set_gt_info(im_id, &infos);
-    Ok(seen)
-}
-
 /// Fraction of full scale below which an exposure-stack pixel counts as under-exposed.
 const UNDER_EXPOSED_FRACTION: f64 = 0.02;
 
@@ -541,9 +414,9 @@ fn run_exposure_stacks(
         ms.join(", "),
         UNDER_EXPOSED_FRACTION * 100.0,
     );
-    let bar = crate::progress::bar(views.len() as u64, "exposure stacks");
+    let bar = glint_eval::progress::bar(views.len() as u64, "exposure stacks");
     for (k, t_w_c) in views.iter().enumerate() {
-        let seed = args.seed.wrapping_mul(1000).wrapping_add(k as u64);
+        let seed = capture_seed(args.seed, k);
         let (stack, truth) = camera.capture_exposure_stack(t_w_c, exposures_s, seed)?;
         let dir = bop.layout().exposure_stack_dir(k as u32);
         write_exposure_stack(&dir, &stack)?;

@@ -45,7 +45,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let models = args.out.join("models");
     std::fs::create_dir_all(&models).with_context(|| format!("creating {}", models.display()))?;
     let config = SdfConfig::default();
-    let bar = crate::progress::bar(Part::ALL.len() as u64, "parts");
+    let bar = glint_eval::progress::bar(Part::ALL.len() as u64, "parts");
     let mut rows = Vec::new();
     for part in Part::ALL {
         bar.set_message(part.name());

@@ -4,14 +4,12 @@
 
 mod bench;
 mod calibrate_cmd;
-mod calibrate_scene;
 mod capture_cmd;
 mod demo;
 mod eval;
 mod mesh_cmd;
 mod mitsuba_export;
 mod preview;
-mod progress;
 
 use std::path::PathBuf;
 

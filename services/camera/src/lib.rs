@@ -8,5 +8,7 @@ pub mod edge_errors;
 pub mod effects;
 pub mod exposure;
 pub mod materials;
+pub mod record;
+pub mod setup;
 pub mod views;
 pub mod visibility;

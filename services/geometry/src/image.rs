@@ -86,6 +86,33 @@ impl<T: Copy> Image<T> {
         let w = self.width as usize;
         &self.data[v as usize * w..(v as usize + 1) * w]
     }
+
+    /// The image of `f` applied to every pixel: same size, so it cannot fail.
+    pub fn map<U: Copy>(&self, f: impl FnMut(T) -> U) -> Image<U> {
+        Image {
+            width: self.width,
+            height: self.height,
+            data: self.data.iter().copied().map(f).collect(),
+        }
+    }
+
+    /// The pixel-wise `f(a, b)` of two images, or `None` when their sizes differ.
+    pub fn zip_map<U: Copy, V: Copy>(
+        &self,
+        other: &Image<U>,
+        mut f: impl FnMut(T, U) -> V,
+    ) -> Option<Image<V>> {
+        ((self.width, self.height) == (other.width, other.height)).then(|| Image {
+            width: self.width,
+            height: self.height,
+            data: self
+                .data
+                .iter()
+                .zip(&other.data)
+                .map(|(&a, &b)| f(a, b))
+                .collect(),
+        })
+    }
 }
 
 /// Digital numbers as intensities normalised to full scale, `dn / max_dn` in [0, 1]: the
@@ -177,6 +204,20 @@ impl DepthMap {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn map_and_zip_map_keep_the_size() {
+        let a = Image::new(2, 1, vec![1u16, 2]).unwrap();
+        let doubled = a.map(|x| x as f32 * 2.0);
+        assert_eq!((doubled.width(), doubled.height()), (2, 1));
+        assert_eq!(doubled.data(), &[2.0, 4.0]);
+        let sum = a.zip_map(&doubled, |x, y| x as f32 + y).unwrap();
+        assert_eq!(sum.data(), &[3.0, 6.0]);
+        assert!(
+            a.zip_map(&Image::filled(1, 1, 0u8).unwrap(), |x, _| x)
+                .is_none()
+        );
+    }
 
     #[test]
     fn buffers_are_checked() {

@@ -188,7 +188,7 @@ pub fn run(args: &RefineBenchArgs) -> anyhow::Result<()> {
         ..IcpConfig::with_method(method)
     });
     let problems = args.parts.0.len() * args.points.len() * args.views.len();
-    let bar = crate::progress::bar(problems as u64, "bench refine");
+    let bar = glint_eval::progress::bar(problems as u64, "bench refine");
     let mut rows = Vec::new();
     for (part_index, &part) in args.parts.0.iter().enumerate() {
         bar.set_message(part.name());

@@ -1,9 +1,6 @@
 //! `glint eval …`: the paper's experiments on mock-camera data (or any BOP scene).
 
-mod metrics;
 mod refine_exp;
-mod scenes;
-pub(crate) use scenes::same_pose;
 mod uncertainty_exp;
 
 #[derive(clap::Subcommand)]

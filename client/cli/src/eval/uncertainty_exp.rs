@@ -7,14 +7,13 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use glint_calibration::plot::{FONT, padded_range, png};
-use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
-use glint_camera::capture::{CaptureConfig, CaptureTruth, MockSliCamera, StereoCapture};
-use glint_camera::{materials, views};
+use glint_camera::capture::{CaptureTruth, StereoCapture};
+use glint_camera::materials;
+use glint_camera::setup::{BinSetup, BinSetupSpec};
 use glint_estimation::depth_sigma::{NoiseModel, depth_sigma};
 use glint_geometry::Part;
 use glint_geometry::image::normalised_intensity;
 use glint_geometry::io::write_file_atomically;
-use glint_render::rig::SliRig;
 use plotters::prelude::*;
 
 #[derive(clap::Args)]
@@ -72,26 +71,19 @@ fn spearman(x: &[f64], y: &[f64]) -> f64 {
 pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let rig = SliRig::ensenso_n35().resized(args.resolution.0, args.resolution.1)?;
-    let bin = BinSpec::default();
-    let mesh = args.part.mesh();
-    let poses = drop_parts(&mesh, args.instances as usize, &bin, args.seed)?;
-    let scene = bin_scene(&mesh, &poses, materials::ground_truth(args.part), &bin)?;
-    let camera = MockSliCamera {
-        rig,
-        scene: &scene,
-        config: CaptureConfig {
+    let setup = BinSetup::new(
+        &args.part.mesh(),
+        materials::ground_truth(args.part),
+        &BinSetupSpec {
+            instances: args.instances,
+            seed: args.seed,
+            width_px: args.resolution.0,
+            height_px: args.resolution.1,
             samples_per_pixel: args.spp,
-            ..CaptureConfig::for_rig(&rig)?
         },
-    };
-    let t_w_c = views::spherical_cap(
-        1,
-        crate::capture_cmd::VIEW_DISTANCE_M,
-        crate::capture_cmd::VIEW_CAP_DEG,
-        bin.centre(),
-        rig.stereo.baseline_m,
-    )[0];
+    )?;
+    let (rig, camera) = (setup.rig, setup.camera());
+    let t_w_c = setup.views(1)[0];
     let renders = camera.render_shots(&t_w_c, args.seed);
     let sensor = &camera.config.sensor;
     let max_dn = sensor.max_dn();
@@ -100,7 +92,7 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
     let shot = |s: u64| normalised_intensity(&sensor.read_out(&renders.left[0], s), max_dn);
     let noise = NoiseModel::fit_from_pair(&shot(0xA1), &shot(0xB2), max_dn)?;
 
-    let bar = crate::progress::bar(args.repeats as u64, "captures");
+    let bar = glint_eval::progress::bar(args.repeats as u64, "captures");
     let mut captures: Vec<StereoCapture> = Vec::new();
     let mut truths: Vec<CaptureTruth> = Vec::new();
     for r in 0..args.repeats {

@@ -175,7 +175,7 @@ fn encode_png(image: DynamicImage) -> Vec<u8> {
 }
 
 /// Writes an 8-bit gray PNG atomically.
-pub(crate) fn write_png_u8(path: &Path, image: &Image<u8>) -> Result<(), DatasetError> {
+pub fn write_png_u8(path: &Path, image: &Image<u8>) -> Result<(), DatasetError> {
     Ok(write_file_atomically(path, &encode_png_u8(image))?)
 }
 

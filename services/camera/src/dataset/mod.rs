@@ -14,6 +14,7 @@
 //! [BOP]: https://github.com/thodan/bop_toolkit/blob/master/docs/bop_datasets_format.md
 
 pub mod bop;
+pub mod calibration_scene;
 mod error;
 pub mod exposure_stack;
 mod image_files;
@@ -25,4 +26,4 @@ pub mod transforms;
 
 pub use error::DatasetError;
 pub use exposure_stack::{ExposureStackFiles, write_exposure_stack};
-pub use image_files::{PatternImage, StereoSide, depth_from_units, depth_to_units};
+pub use image_files::{PatternImage, StereoSide, depth_from_units, depth_to_units, write_png_u8};

@@ -5,6 +5,20 @@ use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::error::DatasetError;
+
+/// Why GT info could not be computed from an instance's masks.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GtInfoError {
+    /// The two masks (and the depth map, when given) must have one size.
+    #[error(
+        "masks and depth must have the same size: full mask {full_px:?} px, visible mask {visible_px:?} px, depth {depth_px:?} px"
+    )]
+    SizeMismatch {
+        full_px: (u32, u32),
+        visible_px: (u32, u32),
+        depth_px: Option<(u32, u32)>,
+    },
+}
 use crate::dataset::json::JsonNode;
 use crate::dataset::transforms::{isometry_from_rotation_and_mm, rotation_and_mm_from_isometry};
 
@@ -168,15 +182,16 @@ impl BopGtInfo {
         full: &Image<u8>,
         visible: &Image<u8>,
         depth: Option<&DepthMap>,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, GtInfoError> {
         let size = (full.width(), full.height());
-        let sizes_match = (visible.width(), visible.height()) == size
-            && depth.is_none_or(|d| (d.depth_m.width(), d.depth_m.height()) == size);
-        if !sizes_match {
-            return Err(format!(
-                "masks and depth must have the same size; the full mask is {}×{} px",
-                size.0, size.1
-            ));
+        let visible_size = (visible.width(), visible.height());
+        let depth_size = depth.map(|d| (d.depth_m.width(), d.depth_m.height()));
+        if visible_size != size || depth_size.is_some_and(|d| d != size) {
+            return Err(GtInfoError::SizeMismatch {
+                full_px: size,
+                visible_px: visible_size,
+                depth_px: depth_size,
+            });
         }
         let mut obj = BoxAccumulator::default();
         let mut visib = BoxAccumulator::default();

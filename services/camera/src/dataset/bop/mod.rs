@@ -38,7 +38,7 @@ mod tests;
 use std::path::{Path, PathBuf};
 
 pub use camera::{BopCamera, SceneCameraEntry, read_dataset_camera, write_dataset_camera};
-pub use gt::{BopGt, BopGtInfo, GtInfoEntry, PixelBox, SceneGtEntry};
+pub use gt::{BopGt, BopGtInfo, GtInfoEntry, GtInfoError, PixelBox, SceneGtEntry};
 pub use models::{
     ContinuousSymmetry, EXACT_DIAMETER_MAX_VERTICES, ModelBox, ModelInfo, ModelSymmetry,
     mesh_diameter_m, model_path, read_model, read_models_info, write_models,
@@ -47,6 +47,14 @@ pub use reader::BopSceneReader;
 pub use writer::BopSceneWriter;
 
 use super::StereoSide;
+
+/// The same pose up to BOP's file rounding (millimetres with ~6 digits, rotations as 9
+/// rounded numbers): within 0.1 mm and 0.01 rad. Identifies one instance across the views of
+/// a static scene.
+pub fn same_pose(a: &nalgebra::Isometry3<f64>, b: &nalgebra::Isometry3<f64>) -> bool {
+    (a.translation.vector - b.translation.vector).norm() < 1e-4
+        && (a.rotation.inverse() * b.rotation).angle() < 1e-2
+}
 
 /// Which of BOP's two masks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

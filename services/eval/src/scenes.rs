@@ -5,12 +5,14 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
 use glint_camera::capture::{CaptureConfig, MockSliCamera};
-use glint_camera::dataset::bop::{BopSceneReader, BopSceneWriter, MaskKind, write_models};
+use glint_camera::dataset::bop::{
+    BopSceneReader, BopSceneWriter, MaskKind, same_pose, write_models,
+};
 use glint_camera::dataset::rig_file::{read_rig_json, write_rig_json};
-use glint_camera::dataset::{PatternImage, StereoSide};
-use glint_camera::views;
+use glint_camera::dataset::{PatternImage, StereoSide, write_png_u8};
+use glint_camera::record::{to_8bit, write_bop_image};
+use glint_camera::setup::{BinSetup, BinSetupSpec, capture_seed};
 use glint_estimation::depth_sigma::{NoiseModel, depth_sigma};
 use glint_estimation::points::{DepthPoint, DepthSigma, interior_mask, object_points};
 use glint_geometry::image::{Image, normalised_intensity};
@@ -106,22 +108,24 @@ fn generate(
     seed: u64,
     spec: &SceneSpec,
 ) -> anyhow::Result<()> {
-    let rig = SliRig::ensenso_n35().resized(spec.width_px, spec.height_px)?;
-    let bin = BinSpec::default();
-    let poses = drop_parts(&object.mesh, spec.instances as usize, &bin, seed)?;
-    let scene = bin_scene(&object.mesh, &poses, object.material, &bin)?;
+    let setup = BinSetup::new(
+        &object.mesh,
+        object.material,
+        &BinSetupSpec {
+            instances: spec.instances,
+            seed,
+            width_px: spec.width_px,
+            height_px: spec.height_px,
+            samples_per_pixel: spec.spp,
+        },
+    )?;
+    let rig = setup.rig;
     let camera = MockSliCamera {
-        rig,
-        scene: &scene,
         config: capture_config(&rig, spec)?,
+        ..setup.camera()
     };
-    let view_poses = views::spherical_cap(
-        spec.views as usize,
-        crate::capture_cmd::VIEW_DISTANCE_M,
-        crate::capture_cmd::VIEW_CAP_DEG,
-        bin.centre(),
-        rig.stereo.baseline_m,
-    );
+    let view_poses = setup.views(spec.views as usize);
+    let poses = &setup.poses;
     write_models(
         &dataset.join("models"),
         &[(OBJ_ID, &object.mesh, &object.symmetry)],
@@ -133,9 +137,9 @@ fn generate(
     write_rig_json(&bop.layout().rig_json(), &rig)?;
     let bar = crate::progress::bar(view_poses.len() as u64, &format!("{} {seed}", object.name));
     for (k, t_w_c) in view_poses.iter().enumerate() {
-        let capture_seed = seed.wrapping_mul(1000).wrapping_add(k as u64);
-        let (capture, truth) = camera.capture(t_w_c, capture_seed)?;
-        crate::capture_cmd::write_bop_image(&mut bop, k as u32, &capture, &camera, &poses, OBJ_ID)?;
+        let view_seed = capture_seed(seed, k);
+        let (capture, truth) = camera.capture(t_w_c, view_seed)?;
+        write_bop_image(&mut bop, k as u32, &capture, &camera, poses, OBJ_ID)?;
         if k == 0 {
             // Two more read-outs of this view's left pattern radiance: what a user does to
             // measure the sensor noise (two shots of a static scene).
@@ -143,12 +147,10 @@ fn generate(
                 let dn = camera
                     .config
                     .sensor
-                    .read_out(&truth.left_radiance, capture_seed ^ s);
-                crate::capture_cmd::write_gray(
-                    &noise_shot_path(&glint_dir, shot),
-                    &dn,
-                    camera.config.sensor.max_dn(),
-                )?;
+                    .read_out(&truth.left_radiance, view_seed ^ s);
+                let path = noise_shot_path(&glint_dir, shot);
+                write_png_u8(&path, &to_8bit(&dn, camera.config.sensor.max_dn()))
+                    .with_context(|| format!("writing {}", path.display()))?;
             }
         }
         bar.inc(1);
@@ -186,15 +188,7 @@ pub struct LoadedScene {
 
 fn pattern_as_normalised(image: PatternImage) -> (Image<f32>, u16) {
     match image {
-        PatternImage::Bits8(img) => {
-            let dn = Image::new(
-                img.width(),
-                img.height(),
-                img.data().iter().map(|&v| v as u16).collect(),
-            )
-            .expect("same size");
-            (normalised_intensity(&dn, 255), 255)
-        }
+        PatternImage::Bits8(img) => (normalised_intensity(&img.map(u16::from), 255), 255),
         PatternImage::Bits16(img) => (normalised_intensity(&img, u16::MAX), u16::MAX),
     }
 }
@@ -310,10 +304,4 @@ pub fn load_scene(
         });
     }
     Ok(LoadedScene { views })
-}
-
-/// The same world pose up to file rounding (BOP stores mm with ~6 digits): 0.1 mm and 0.01 rad.
-pub(crate) fn same_pose(a: &Isometry3<f64>, b: &Isometry3<f64>) -> bool {
-    (a.translation.vector - b.translation.vector).norm() < 1e-4
-        && (a.rotation.inverse() * b.rotation).angle() < 1e-2
 }

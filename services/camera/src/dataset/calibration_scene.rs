@@ -1,4 +1,5 @@
-//! The calibration scene of `glint calibrate bsdf` and `eval-bsdf`: a capture written by
+//! The calibration scene of the BSDF fit (`glint calibrate bsdf`, `eval-bsdf`, the calibration
+//! server): a capture written by
 //! `glint capture --exposure-stack … --out DIR`, read as a real set-up would know it:
 //!
 //! - the BOP scene folder `DIR/test/000001` (`--scene` may name it or `DIR` itself, which must
@@ -19,14 +20,60 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
-use glint_camera::dataset::bop::{BopSceneReader, read_model};
-use glint_camera::dataset::reference_file::read_reference_surface_json;
-use glint_camera::dataset::rig_file::read_rig_json;
 use glint_render::bsdf::PrincipledParams;
 use glint_render::rig::SliRig;
 use glint_render::scene::Scene;
+use glint_render::scene::SceneError;
 use nalgebra::Isometry3;
+
+use crate::dataset::DatasetError;
+use crate::dataset::bop::{BopSceneReader, read_model, same_pose};
+use crate::dataset::reference_file::read_reference_surface_json;
+use crate::dataset::rig_file::read_rig_json;
+
+/// Why a calibration scene could not be read; each names the file to fix.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrationSceneError {
+    #[error(transparent)]
+    Dataset(#[from] DatasetError),
+    #[error(
+        "{}: not a capture: neither {} nor {} exists (write one with `glint capture --exposure-stack`)",
+        dir.display(),
+        dir.join("scene_gt.json").display(),
+        dir.join("test").join("000001").join("scene_gt.json").display()
+    )]
+    NotACapture { dir: PathBuf },
+    #[error("{}: image {im_id} has no camera pose (cam_R_w2c, cam_t_w2c)", path.display())]
+    NoCameraPose { path: PathBuf, im_id: u32 },
+    #[error(
+        "{}: image {im_id}'s cam_K (fx {fx_px}, cx {cx_px}) disagrees with {} (fx {rig_fx_px}, cx {rig_cx_px})",
+        path.display(),
+        rig_path.display()
+    )]
+    IntrinsicsMismatch {
+        path: PathBuf,
+        rig_path: PathBuf,
+        im_id: u32,
+        fx_px: f64,
+        cx_px: f64,
+        rig_fx_px: f64,
+        rig_cx_px: f64,
+    },
+    #[error("{}: no labelled part in any view", path.display())]
+    NoPart { path: PathBuf },
+    #[error("{}: objects {obj_ids:?}; a calibration scene holds copies of one part", path.display())]
+    SeveralParts { path: PathBuf, obj_ids: Vec<u32> },
+    #[error("{}: no models folder above it", scene_dir.display())]
+    NoModels { scene_dir: PathBuf },
+    #[error("{}: no view {im_id}; the capture has views {available:?}", scene_dir.display())]
+    NoView {
+        scene_dir: PathBuf,
+        im_id: u32,
+        available: Vec<u32>,
+    },
+    #[error("building the scene: {0}")]
+    Scene(#[from] SceneError),
+}
 
 /// One view of the capture.
 #[derive(Clone, Debug)]
@@ -55,39 +102,32 @@ pub struct CalibrationScene {
 
 impl CalibrationScene {
     /// The view with image id `im_id`.
-    pub fn view(&self, im_id: u32) -> anyhow::Result<&CaptureView> {
+    pub fn view(&self, im_id: u32) -> Result<&CaptureView, CalibrationSceneError> {
         self.views
             .iter()
             .find(|v| v.im_id == im_id)
-            .with_context(|| {
-                format!(
-                    "{}: no view {im_id}; the capture has views {:?}",
-                    self.scene_dir.display(),
-                    self.views.iter().map(|v| v.im_id).collect::<Vec<_>>()
-                )
+            .ok_or_else(|| CalibrationSceneError::NoView {
+                scene_dir: self.scene_dir.clone(),
+                im_id,
+                available: self.views.iter().map(|v| v.im_id).collect(),
             })
     }
 }
 
 /// The BOP scene folder `dir` names: `dir` itself if it has `scene_gt.json`, else
 /// `dir/test/000001` (where `glint capture` writes its one scene).
-pub fn scene_dir_of(dir: &Path) -> anyhow::Result<PathBuf> {
+pub fn scene_dir_of(dir: &Path) -> Result<PathBuf, CalibrationSceneError> {
     let nested = dir.join("test").join("000001");
-    for candidate in [dir.to_path_buf(), nested.clone()] {
-        if candidate.join("scene_gt.json").is_file() {
-            return Ok(candidate);
-        }
-    }
-    bail!(
-        "{}: not a capture: neither {} nor {} exists (write one with `glint capture --exposure-stack`)",
-        dir.display(),
-        dir.join("scene_gt.json").display(),
-        nested.join("scene_gt.json").display()
-    )
+    [dir.to_path_buf(), nested]
+        .into_iter()
+        .find(|candidate| candidate.join("scene_gt.json").is_file())
+        .ok_or_else(|| CalibrationSceneError::NotACapture {
+            dir: dir.to_path_buf(),
+        })
 }
 
 /// Reads the capture at `dir` (see the module doc).
-pub fn load(dir: &Path) -> anyhow::Result<CalibrationScene> {
+pub fn load(dir: &Path) -> Result<CalibrationScene, CalibrationSceneError> {
     let scene_dir = scene_dir_of(dir)?;
     let reader = BopSceneReader::open(&scene_dir)?;
     let layout = reader.layout().clone();
@@ -101,22 +141,22 @@ pub fn load(dir: &Path) -> anyhow::Result<CalibrationScene> {
     for im_id in reader.image_ids() {
         let camera = reader.camera(im_id)?;
         let Some(t_c_w) = camera.t_c_w else {
-            bail!(
-                "{}: image {im_id} has no camera pose (cam_R_w2c, cam_t_w2c)",
-                layout.scene_camera_json().display()
-            );
+            return Err(CalibrationSceneError::NoCameraPose {
+                path: layout.scene_camera_json(),
+                im_id,
+            });
         };
         let c = camera.intrinsics;
         if (c.fx_px - k.fx_px).abs() > 1e-6 * k.fx_px || (c.cx_px - k.cx_px).abs() > 1e-3 {
-            bail!(
-                "{}: image {im_id}'s cam_K (fx {}, cx {}) disagrees with {} (fx {}, cx {})",
-                layout.scene_camera_json().display(),
-                c.fx_px,
-                c.cx_px,
-                layout.rig_json().display(),
-                k.fx_px,
-                k.cx_px
-            );
+            return Err(CalibrationSceneError::IntrinsicsMismatch {
+                path: layout.scene_camera_json(),
+                rig_path: layout.rig_json(),
+                im_id,
+                fx_px: c.fx_px,
+                cx_px: c.cx_px,
+                rig_fx_px: k.fx_px,
+                rig_cx_px: k.cx_px,
+            });
         }
         let t_w_c = t_c_w.inverse();
         for gt in reader.gt(im_id).unwrap_or(&[]) {
@@ -124,7 +164,7 @@ pub fn load(dir: &Path) -> anyhow::Result<CalibrationScene> {
                 obj_ids.push(gt.obj_id);
             }
             let t_w_o = t_w_c * gt.t_c_o;
-            if !t_w_os.iter().any(|p| crate::eval::same_pose(p, &t_w_o)) {
+            if !t_w_os.iter().any(|p| same_pose(p, &t_w_o)) {
                 t_w_os.push(t_w_o);
             }
         }
@@ -136,22 +176,25 @@ pub fn load(dir: &Path) -> anyhow::Result<CalibrationScene> {
     }
     let obj_id = match obj_ids.as_slice() {
         [one] => *one,
-        [] => bail!(
-            "{}: no labelled part in any view",
-            layout.scene_gt_json().display()
-        ),
-        many => bail!(
-            "{}: objects {many:?}; a calibration scene holds copies of one part",
-            layout.scene_gt_json().display()
-        ),
+        [] => {
+            return Err(CalibrationSceneError::NoPart {
+                path: layout.scene_gt_json(),
+            });
+        }
+        many => {
+            return Err(CalibrationSceneError::SeveralParts {
+                path: layout.scene_gt_json(),
+                obj_ids: many.to_vec(),
+            });
+        }
     };
-    let models_dir = reader
-        .models_dir()
-        .with_context(|| format!("{}: no models folder above it", scene_dir.display()))?;
+    let Some(models_dir) = reader.models_dir() else {
+        return Err(CalibrationSceneError::NoModels { scene_dir });
+    };
     let mesh = read_model(&models_dir, obj_id)?.mesh;
     let parts = t_w_os.len() as u32;
     // The part's material is a placeholder: the fit and the evaluation shade it with their own.
-    let scene = glint_camera::bin::bin_scene_with_bin_material(
+    let scene = crate::bin::bin_scene_with_bin_material(
         &mesh,
         &t_w_os,
         reference.material,

@@ -1,0 +1,157 @@
+//! One constructor for a mock-camera set-up: the rig, the default bin, the part dropped into it
+//! (seeded), the render scene, and the capture settings — what `glint capture`, the experiments,
+//! the benchmarks and the camera server all start from.
+
+use glint_geometry::TriMesh;
+use glint_render::bsdf::PrincipledParams;
+use glint_render::rig::SliRig;
+use glint_render::scene::{Scene, SceneError};
+use glint_render::stereo::StereoError;
+use nalgebra::Isometry3;
+
+use crate::bin::{BinError, BinSpec, bin_scene, drop_parts};
+use crate::capture::{CaptureConfig, MockSliCamera};
+use crate::views;
+
+/// Working distance of the capture views from the bin's centre, metres (like ROBI's robot-arm
+/// views); every command that captures a bin uses it and [`VIEW_CAP_DEG`].
+pub const VIEW_DISTANCE_M: f64 = 0.5;
+/// Polar half-angle of the cap of capture views around world +z, degrees.
+pub const VIEW_CAP_DEG: f64 = 35.0;
+
+/// The noise seed of view `view` of the scene seeded `scene_seed`: every capture of a scene
+/// gets its own, reproducible noise.
+pub fn capture_seed(scene_seed: u64, view: usize) -> u64 {
+    scene_seed.wrapping_mul(1000).wrapping_add(view as u64)
+}
+
+/// Why a set-up could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    #[error("rig: {0}")]
+    Rig(#[from] glint_geometry::camera::CameraError),
+    #[error("dropping the parts: {0}")]
+    Drop(#[from] BinError),
+    #[error("building the scene: {0}")]
+    Scene(#[from] SceneError),
+    #[error("matcher: {0}")]
+    Matcher(#[from] StereoError),
+}
+
+/// What a bin set-up is made from.
+#[derive(Clone, Debug)]
+pub struct BinSetupSpec {
+    /// Parts per bin.
+    pub instances: u32,
+    /// Seed of the drop (the parts' poses).
+    pub seed: u64,
+    /// Camera resolution, px.
+    pub width_px: u32,
+    pub height_px: u32,
+    /// Samples per pixel of the capture's renders.
+    pub samples_per_pixel: u32,
+}
+
+/// A bin of one part seen by the mock camera.
+pub struct BinSetup {
+    pub rig: SliRig,
+    pub bin: BinSpec,
+    /// Object → world of each instance (scene labels 1..=N).
+    pub poses: Vec<Isometry3<f64>>,
+    pub scene: Scene,
+    pub config: CaptureConfig,
+}
+
+impl BinSetup {
+    /// `spec.instances` copies of `mesh` (metres) dropped into the default bin, painted with
+    /// `material`, seen by an Ensenso N35 rig at `spec`'s resolution with the camera's default
+    /// capture settings at `spec.samples_per_pixel`.
+    pub fn new(
+        mesh: &TriMesh,
+        material: PrincipledParams<f32>,
+        spec: &BinSetupSpec,
+    ) -> Result<Self, SetupError> {
+        let rig = SliRig::ensenso_n35().resized(spec.width_px, spec.height_px)?;
+        let bin = BinSpec::default();
+        let poses = drop_parts(mesh, spec.instances as usize, &bin, spec.seed)?;
+        let scene = bin_scene(mesh, &poses, material, &bin)?;
+        let config = CaptureConfig {
+            samples_per_pixel: spec.samples_per_pixel,
+            ..CaptureConfig::for_rig(&rig)?
+        };
+        Ok(Self {
+            rig,
+            bin,
+            poses,
+            scene,
+            config,
+        })
+    }
+
+    /// The same bin (poses) with the part in another material, e.g. its diffuse twin.
+    pub fn repainted(
+        &self,
+        mesh: &TriMesh,
+        material: PrincipledParams<f32>,
+    ) -> Result<Self, SetupError> {
+        Ok(Self {
+            rig: self.rig,
+            bin: self.bin,
+            poses: self.poses.clone(),
+            scene: bin_scene(mesh, &self.poses, material, &self.bin)?,
+            config: self.config.clone(),
+        })
+    }
+
+    /// The mock camera looking at this bin.
+    pub fn camera(&self) -> MockSliCamera<'_> {
+        MockSliCamera {
+            rig: self.rig,
+            scene: &self.scene,
+            config: self.config.clone(),
+        }
+    }
+
+    /// `count` capture views (left camera → world) on the cap above the bin.
+    pub fn views(&self, count: usize) -> Vec<Isometry3<f64>> {
+        views::spherical_cap(
+            count,
+            VIEW_DISTANCE_M,
+            VIEW_CAP_DEG,
+            self.bin.centre(),
+            self.rig.stereo.baseline_m,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glint_geometry::Part;
+
+    #[test]
+    fn a_set_up_is_reproducible_and_repainting_keeps_the_poses() {
+        let spec = BinSetupSpec {
+            instances: 3,
+            seed: 7,
+            width_px: 64,
+            height_px: 48,
+            samples_per_pixel: 1,
+        };
+        let mesh = Part::Zigzag.mesh();
+        let a = BinSetup::new(&mesh, crate::materials::ground_truth(Part::Zigzag), &spec)
+            .expect("valid spec");
+        let b = BinSetup::new(&mesh, crate::materials::ground_truth(Part::Zigzag), &spec)
+            .expect("valid spec");
+        assert_eq!(a.poses, b.poses);
+        assert_eq!(a.poses.len(), 3);
+        let matte = a
+            .repainted(&mesh, crate::materials::diffuse_twin())
+            .expect("same bin");
+        assert_eq!(matte.poses, a.poses);
+        assert_eq!(a.rig.stereo.intrinsics.width_px, 64);
+        assert_eq!(a.views(5).len(), 5);
+        assert_ne!(capture_seed(1, 0), capture_seed(1, 1));
+        assert_ne!(capture_seed(1, 0), capture_seed(2, 0));
+    }
+}

@@ -1,0 +1,16 @@
+//! Glint's experiments as a library: the paper's evaluations on mock-camera data (or any BOP
+//! scene), shared by `glint eval`, `glint bench`, the servers' tests and `tests/`.
+//!
+//! - [`scenes`]: mock-camera bins cached as BOP scenes, and the reader that turns a BOP scene
+//!   into per-view object points with σ_z (the refiner's input path, eq 1–7);
+//! - [`metrics`]: initial poses drawn like a template detector's, symmetry-aware NEES;
+//! - [`table1`]: Table I, SDF refinement against ICP;
+//! - [`progress`]: progress bars for long runs.
+//!
+//! Evaluation code reads ground truth (to draw initial poses and to score); nothing that
+//! estimates or predicts may depend on this crate.
+
+pub mod metrics;
+pub mod progress;
+pub mod scenes;
+pub mod table1;

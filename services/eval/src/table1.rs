@@ -1,0 +1,677 @@
+//! The paper's Table I on mock-camera data (`glint eval refine`): SDF refinement (ours)
+//! against ICP from the same initial poses and the same depth points; rates are counted over
+//! GT instances at least 80 % visible in the reference view. Evaluation only: reads ground
+//! truth to draw initial poses and to score.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use glint_camera::materials;
+use glint_estimation::icp::{IcpConfig, IcpMethod, IcpModel, refine_icp};
+use glint_estimation::points::DepthPoint;
+use glint_estimation::refine::{SdfRefineConfig, refine_sdf};
+use glint_geometry::io::{read_mesh, write_file_atomically};
+use glint_geometry::pose_deviation::{CorrectThreshold, pose_deviation};
+use glint_geometry::sdf::{SdfConfig, SdfGrid};
+use glint_geometry::{LengthUnit, Part, Symmetry};
+use nalgebra::{Isometry3, Point3};
+use rand::SeedableRng;
+use rand::seq::IndexedRandom;
+
+use crate::metrics::{InitialPoseNoise, chi2_mean_band, nees};
+use crate::scenes::{
+    EvalObject, LoadedScene, OBJ_ID, SceneSpec, capture_config, ensure_scene, load_scene,
+};
+
+/// The settings of one Table I run (`glint eval refine`'s flags).
+#[derive(Clone, Debug)]
+pub struct RefineExperiment {
+    /// Parts to run, or (with `mesh`) ignored.
+    pub parts: Vec<Part>,
+    /// Run on this mesh (PLY/OBJ/STL, in `unit`) with `symmetry` instead of the parts.
+    pub mesh: Option<PathBuf>,
+    pub unit: LengthUnit,
+    pub symmetry: Symmetry,
+    /// Bins (scenes) per part.
+    pub scenes: u32,
+    /// Views captured per scene (over a spherical cap above the bin).
+    pub views_per_scene: u32,
+    /// View counts of the experiment; each at most `views_per_scene`.
+    pub views: Vec<u32>,
+    /// Parts per bin.
+    pub instances: u32,
+    pub seed: u64,
+    /// Camera resolution, px.
+    pub resolution: (u32, u32),
+    /// Samples per pixel of the multi-path renders.
+    pub spp: u32,
+    /// ICP's max correspondence distances to choose from, mm, on separate tuning scenes.
+    pub icp_distances_mm: Vec<f64>,
+    /// Tuning scenes per part for ICP's distance (seeds disjoint from the evaluation's).
+    pub tune_scenes: u32,
+    /// Control: paint the parts with the matte diffuse twin (scenes cached separately).
+    pub matte: bool,
+    /// The mock camera's matching window radius, px.
+    pub window_radius_px: u32,
+    /// Mask erosion before refinement, px (default: the window radius).
+    pub erode_px: Option<u32>,
+    /// Voxel size of the SDF grid, mm.
+    pub sdf_voxel_mm: f64,
+    /// Output directory (scenes are cached in `out/scenes` and reused when rerun).
+    pub out: PathBuf,
+}
+
+/// A pose estimator compared in the experiment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RefineMethod {
+    /// The initial pose itself (the detector's row of Table I).
+    Initial,
+    /// Uncertainty-weighted SDF refinement (ours, eq 8–11).
+    Sdf,
+    /// The ICP baseline, point-to-point.
+    Icp,
+}
+
+impl RefineMethod {
+    pub const ALL: [Self; 3] = [Self::Initial, Self::Sdf, Self::Icp];
+
+    /// The name in the output files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Initial => "initial",
+            Self::Sdf => "sdf",
+            Self::Icp => "icp",
+        }
+    }
+}
+
+/// One refinement problem: an instance, a reference view, and the views whose points it gets.
+#[derive(Clone, Debug)]
+pub struct Trial {
+    object: String,
+    scene_seed: u64,
+    views: Vec<u32>,
+    /// Index of the reference view (the first of `views`) in the scene.
+    reference: usize,
+    instance: usize,
+    t_c_o_gt: Isometry3<f64>,
+    t_c_o_init: Isometry3<f64>,
+}
+
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    method: RefineMethod,
+    t_c_o: Isometry3<f64>,
+    translation_mm: f64,
+    rotation_deg: f64,
+    iterations: usize,
+    time_ms: f64,
+    status: String,
+    nees: Option<(f64, usize)>,
+}
+
+fn objects(args: &RefineExperiment) -> anyhow::Result<Vec<EvalObject>> {
+    if let Some(path) = &args.mesh {
+        let loaded = read_mesh(path, args.unit)
+            .with_context(|| format!("reading --mesh {}", path.display()))?;
+        for w in &loaded.warnings {
+            tracing::warn!("{}: {w}", path.display());
+        }
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "mesh".into());
+        return Ok(vec![EvalObject {
+            name,
+            mesh: loaded.mesh,
+            symmetry: args.symmetry.clone(),
+            // A user's part is painted like the shiny Tube Fitting.
+            material: materials::ground_truth(Part::TubeFitting),
+        }]);
+    }
+    Ok(args
+        .parts
+        .iter()
+        .copied()
+        .map(|p| EvalObject {
+            name: p.name().into(),
+            mesh: p.mesh(),
+            symmetry: p.symmetry(),
+            material: if args.matte {
+                materials::diffuse_twin()
+            } else {
+                materials::ground_truth(p)
+            },
+        })
+        .collect())
+}
+
+/// Every trial of a scene: each instance ≥ 80 % visible in a reference view, with that view
+/// plus k − 1 others drawn at random, for each k; the initial pose is drawn once per
+/// (reference view, instance) so every k starts from the same pose.
+fn trials_of_scene(
+    object: &EvalObject,
+    scene_seed: u64,
+    scene: &LoadedScene,
+    view_counts: &[u32],
+    noise: &InitialPoseNoise,
+    seed: u64,
+) -> Vec<Trial> {
+    let mut out = Vec::new();
+    for (r, view) in scene.views.iter().enumerate() {
+        for obj in view.objects.iter().filter(|o| o.visib_fract >= 0.8) {
+            let mut rng = rand_pcg::Pcg64::seed_from_u64(
+                seed ^ scene_seed.wrapping_mul(0x9E37_79B9)
+                    ^ ((r as u64) << 32)
+                    ^ (obj.instance as u64) << 48,
+            );
+            let t_c_o_init = noise.draw(&obj.t_c_o_gt, &object.symmetry, &mut rng);
+            let others: Vec<usize> = (0..scene.views.len()).filter(|&v| v != r).collect();
+            for &k in view_counts {
+                let mut chosen = vec![r];
+                chosen.extend(others.choose_multiple(&mut rng, k as usize - 1).copied());
+                out.push(Trial {
+                    object: object.name.clone(),
+                    scene_seed,
+                    views: chosen.iter().map(|&v| scene.views[v].im_id).collect(),
+                    reference: r,
+                    instance: obj.instance,
+                    t_c_o_gt: obj.t_c_o_gt,
+                    t_c_o_init,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// The stacked world points of the trial's instance over its views (eq 7, 19).
+fn trial_points(trial: &Trial, scene: &LoadedScene) -> Vec<DepthPoint> {
+    scene
+        .views
+        .iter()
+        .filter(|v| trial.views.contains(&v.im_id))
+        .flat_map(|v| v.objects.iter().filter(|o| o.instance == trial.instance))
+        .flat_map(|o| o.points.iter().copied())
+        .collect()
+}
+
+struct Refiners {
+    sdf: SdfGrid,
+    sdf_config: SdfRefineConfig,
+    icp_model: IcpModel,
+}
+
+fn run_trial(
+    trial: &Trial,
+    scene: &LoadedScene,
+    refiners: &Refiners,
+    icp_config: &IcpConfig,
+    symmetry: &Symmetry,
+    methods: &[RefineMethod],
+) -> Vec<Outcome> {
+    let t_w_c = scene.views[trial.reference].t_w_c;
+    let t_c_w = t_w_c.inverse();
+    let t_o_w_init = (t_w_c * trial.t_c_o_init).inverse();
+    let t_o_w_gt = (t_w_c * trial.t_c_o_gt).inverse();
+    let points = trial_points(trial, scene);
+    let outcome = |method, t_o_w: Isometry3<f64>, iterations, time_ms, status: String, n| {
+        let t_c_o = t_c_w * t_o_w.inverse();
+        let e = pose_deviation(&t_c_o, &trial.t_c_o_gt, symmetry);
+        Outcome {
+            method,
+            t_c_o,
+            translation_mm: e.translation_mm(),
+            rotation_deg: e.rotation_deg(),
+            iterations,
+            time_ms,
+            status,
+            nees: n,
+        }
+    };
+    methods
+        .iter()
+        .map(|&method| match method {
+            RefineMethod::Initial => outcome(method, t_o_w_init, 0, 0.0, "initial".into(), None),
+            RefineMethod::Sdf => {
+                let start = Instant::now();
+                let result = refine_sdf(&refiners.sdf, &points, &t_o_w_init, &refiners.sdf_config);
+                let ms = start.elapsed().as_secs_f64() * 1e3;
+                match result {
+                    Ok(r) => {
+                        let n = nees(&r.t_o_w, &t_o_w_gt, &r.information, symmetry);
+                        let status = format!("{:?}", r.status).to_lowercase();
+                        outcome(method, r.t_o_w, r.iterations, ms, status, Some(n))
+                    }
+                    // A failed refinement keeps the initial pose, flagged.
+                    Err(e) => outcome(method, t_o_w_init, 0, ms, format!("error: {e}"), None),
+                }
+            }
+            RefineMethod::Icp => {
+                let p_w: Vec<Point3<f64>> = points.iter().map(|p| p.p_w).collect();
+                let start = Instant::now();
+                let result = refine_icp(&refiners.icp_model, &p_w, &t_o_w_init, icp_config);
+                let ms = start.elapsed().as_secs_f64() * 1e3;
+                match result {
+                    Ok(r) => {
+                        let status = if r.converged {
+                            "converged"
+                        } else {
+                            "max_iterations"
+                        };
+                        outcome(method, r.t_o_w, r.iterations, ms, status.into(), None)
+                    }
+                    Err(e) => outcome(method, t_o_w_init, 0, ms, format!("error: {e}"), None),
+                }
+            }
+        })
+        .collect()
+}
+
+/// Rates at (5 mm, 5°) and (2 mm, 2°).
+fn rates(outcomes: &[&Outcome]) -> (f64, f64) {
+    let n = outcomes.len().max(1) as f64;
+    let hit = |threshold: &CorrectThreshold| {
+        outcomes.iter().filter(|o| o.is_correct(threshold)).count() as f64 / n
+    };
+    (
+        hit(&CorrectThreshold::MM5_DEG5),
+        hit(&CorrectThreshold::MM2_DEG2),
+    )
+}
+
+impl Outcome {
+    /// The paper's correct-detection test on this outcome's errors.
+    fn is_correct(&self, threshold: &CorrectThreshold) -> bool {
+        self.translation_mm < threshold.translation_m * 1e3
+            && self.rotation_deg < threshold.rotation_rad.to_degrees()
+    }
+}
+
+/// Runs the experiment and writes `results.csv`, `trials.csv`, `nees.csv` and `table.md` to
+/// `args.out`; returns the table.
+pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
+    if args.views.is_empty()
+        || args
+            .views
+            .iter()
+            .any(|&k| k == 0 || k > args.views_per_scene)
+    {
+        anyhow::bail!(
+            "--views {:?}: each view count must be from 1 to --views-per-scene ({})",
+            args.views,
+            args.views_per_scene
+        );
+    }
+    if args.icp_distances_mm.is_empty()
+        || args
+            .icp_distances_mm
+            .iter()
+            .any(|d| !(d.is_finite() && *d > 0.0))
+    {
+        anyhow::bail!("--icp-distances-mm: give positive distances, e.g. 2,5,10,20");
+    }
+    let objects = objects(args)?;
+    let rig =
+        glint_render::rig::SliRig::ensenso_n35().resized(args.resolution.0, args.resolution.1)?;
+    let window_radius_px = args.window_radius_px;
+    let mut spec = SceneSpec {
+        matcher: String::new(),
+        window_radius_px,
+        instances: args.instances,
+        views: args.views_per_scene,
+        width_px: args.resolution.0,
+        height_px: args.resolution.1,
+        spp: args.spp,
+    };
+    spec.matcher = format!(
+        "{:?}",
+        capture_config(&rig, &spec)
+            .context("--window-radius-px")?
+            .matcher
+    );
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let noise = InitialPoseNoise::default();
+    let erode_px = args.erode_px.unwrap_or(window_radius_px);
+    let scene_root = args
+        .out
+        .join(if args.matte { "scenes_matte" } else { "scenes" });
+    let sdf_config = SdfRefineConfig::default();
+    // Evaluation seeds: seed·10⁴ + s; tuning seeds: seed·10⁴ + 5000 + s (disjoint for < 5000 scenes).
+    let eval_seed = |s: u32| args.seed.wrapping_mul(10_000).wrapping_add(s as u64);
+    let tune_seed = |s: u32| eval_seed(5000 + s);
+
+    let mut refiners = Vec::new();
+    for object in &objects {
+        let grid_config = SdfConfig {
+            voxel_size_m: args.sdf_voxel_mm * 1e-3,
+            ..SdfConfig::default()
+        };
+        let sdf = SdfGrid::build(&object.mesh, &grid_config)
+            .with_context(|| format!("SDF of {}", object.name))?;
+        let icp_model = IcpModel::from_mesh(&object.mesh, 50_000, args.seed)
+            .with_context(|| format!("ICP model of {}", object.name))?;
+        refiners.push(Refiners {
+            sdf,
+            sdf_config,
+            icp_model,
+        });
+    }
+
+    // 1. ICP's correspondence distance: its best 2 mm/2° rate (all parts, all view counts) on
+    //    the tuning scenes.
+    let mut tuning: Vec<(f64, usize, usize)> = Vec::new(); // (distance, hits 2/2, n)
+    let mut tune_trials = Vec::new();
+    for (object, _) in objects.iter().zip(&refiners) {
+        for s in 0..args.tune_scenes {
+            let seed = tune_seed(s);
+            let dir = ensure_scene(&scene_root, object, seed, &spec)?;
+            tune_trials.push((object.clone(), seed, dir));
+        }
+    }
+    let bar = crate::progress::bar(tune_trials.len() as u64, "tune icp");
+    let mut per_distance = vec![(0usize, 0usize); args.icp_distances_mm.len()];
+    for (object, seed, dir) in &tune_trials {
+        let index = objects
+            .iter()
+            .position(|o| o.name == object.name)
+            .expect("listed");
+        let scene = load_scene(dir, OBJ_ID, window_radius_px, erode_px)?;
+        let trials = trials_of_scene(object, *seed, &scene, &args.views, &noise, args.seed);
+        for (d, acc) in args.icp_distances_mm.iter().zip(per_distance.iter_mut()) {
+            let config = IcpConfig {
+                max_correspondence_distance_m: d * 1e-3,
+                ..IcpConfig::with_method(IcpMethod::PointToPoint)
+            };
+            for t in &trials {
+                let o = run_trial(
+                    t,
+                    &scene,
+                    &refiners[index],
+                    &config,
+                    &object.symmetry,
+                    &[RefineMethod::Icp],
+                );
+                acc.1 += 1;
+                if o[0].is_correct(&CorrectThreshold::MM2_DEG2) {
+                    acc.0 += 1;
+                }
+            }
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    for (d, (hits, n)) in args.icp_distances_mm.iter().zip(&per_distance) {
+        tuning.push((*d, *hits, *n));
+    }
+    // Ties go to the later (larger) distance: `max_by` keeps the last maximum.
+    let best = tuning
+        .iter()
+        .max_by(|a, b| {
+            (a.1 as f64 / a.2.max(1) as f64).total_cmp(&(b.1 as f64 / b.2.max(1) as f64))
+        })
+        .expect("non-empty grid");
+    let icp_config = IcpConfig {
+        max_correspondence_distance_m: best.0 * 1e-3,
+        ..IcpConfig::with_method(IcpMethod::PointToPoint)
+    };
+    tracing::info!(
+        "ICP max correspondence distance: {} mm (tuning 2/2 rates: {})",
+        best.0,
+        tuning
+            .iter()
+            .map(|(d, h, n)| format!("{d} mm {:.3}", *h as f64 / (*n).max(1) as f64))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+
+    // 2. The evaluation.
+    let mut all: Vec<(Trial, Vec<Outcome>)> = Vec::new();
+    for (object, refiner) in objects.iter().zip(&refiners) {
+        let bar = crate::progress::bar(args.scenes as u64, &object.name);
+        for s in 0..args.scenes {
+            let seed = eval_seed(s);
+            let dir = ensure_scene(&scene_root, object, seed, &spec)?;
+            let scene = load_scene(&dir, OBJ_ID, window_radius_px, erode_px)?;
+            for trial in trials_of_scene(object, seed, &scene, &args.views, &noise, args.seed) {
+                let outcomes = run_trial(
+                    &trial,
+                    &scene,
+                    refiner,
+                    &icp_config,
+                    &object.symmetry,
+                    &RefineMethod::ALL,
+                );
+                all.push((trial, outcomes));
+            }
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+    }
+
+    write_outputs(args, &objects, &all, &noise, &tuning, best.0)
+}
+
+fn write_outputs(
+    args: &RefineExperiment,
+    objects: &[EvalObject],
+    all: &[(Trial, Vec<Outcome>)],
+    noise: &InitialPoseNoise,
+    tuning: &[(f64, usize, usize)],
+    icp_distance_mm: f64,
+) -> anyhow::Result<String> {
+    let mut groups: Vec<String> = objects.iter().map(|o| o.name.clone()).collect();
+    groups.push("all".into());
+    let select = |group: &str, views: u32, method: RefineMethod| -> Vec<&Outcome> {
+        all.iter()
+            .filter(|(t, _)| {
+                (group == "all" || t.object == group) && t.views.len() == views as usize
+            })
+            .flat_map(|(_, o)| o.iter().filter(|o| o.method == method))
+            .collect()
+    };
+    let mut csv = String::from("part,views,method,n,rate_5mm5deg,rate_2mm2deg\n");
+    for group in &groups {
+        for &k in &args.views {
+            for method in RefineMethod::ALL {
+                let sel = select(group, k, method);
+                let (r5, r2) = rates(&sel);
+                let name = method.name();
+                writeln!(csv, "{group},{k},{name},{},{r5:.4},{r2:.4}", sel.len())?;
+            }
+        }
+    }
+    let mut trials_csv = String::from(
+        "part,scene_seed,views,instance,method,gt_t_mm_x,gt_t_mm_y,gt_t_mm_z,gt_qw,gt_qx,gt_qy,gt_qz,\
+         init_t_mm_x,init_t_mm_y,init_t_mm_z,init_qw,init_qx,init_qy,init_qz,\
+         est_t_mm_x,est_t_mm_y,est_t_mm_z,est_qw,est_qx,est_qy,est_qz,\
+         translation_error_mm,rotation_error_deg,iterations,time_ms,status,nees,nees_dof\n",
+    );
+    let pose = |p: &Isometry3<f64>| {
+        let t = p.translation.vector * 1e3;
+        let q = p.rotation.quaternion();
+        format!(
+            "{:.4},{:.4},{:.4},{:.8},{:.8},{:.8},{:.8}",
+            t.x, t.y, t.z, q.w, q.i, q.j, q.k
+        )
+    };
+    for (t, outcomes) in all {
+        let views = t
+            .views
+            .iter()
+            .map(|v| v.to_string())
+            .collect::<Vec<_>>()
+            .join(" ");
+        for o in outcomes {
+            let (n, dof) = o.nees.map_or((String::new(), String::new()), |(n, d)| {
+                (format!("{n:.4}"), d.to_string())
+            });
+            writeln!(
+                trials_csv,
+                "{},{},{views},{},{},{},{},{},{:.4},{:.4},{},{:.3},\"{}\",{n},{dof}",
+                t.object,
+                t.scene_seed,
+                t.instance,
+                o.method.name(),
+                pose(&t.t_c_o_gt),
+                pose(&t.t_c_o_init),
+                pose(&o.t_c_o),
+                o.translation_mm,
+                o.rotation_deg,
+                o.iterations,
+                o.time_ms,
+                o.status.replace('"', "'")
+            )?;
+        }
+    }
+
+    // Table I layout: rows initial, then per view count sdf and icp; columns per part (5,5) (2,2).
+    let mut table = String::new();
+    writeln!(
+        table,
+        "# Pose refinement on mock-camera data (Table I layout)\n\n\
+         Correct-detection rates (%) at (5 mm, 5°) and (2 mm, 2°), symmetry-aware, over GT instances ≥ 80 % visible in the \
+         reference view. Mock SLI camera (physically based renders, real stereo matching), {}×{} px, {} spp, {} parts per bin, \
+         {} scenes × {} views per part, seed {}. Synthetic data, not ROBI.\n",
+        args.resolution.0,
+        args.resolution.1,
+        args.spp,
+        args.instances,
+        args.scenes,
+        args.views_per_scene,
+        args.seed
+    )?;
+    let mut header = String::from("| method |");
+    let mut rule = String::from("|---|");
+    for g in &groups {
+        header += &format!(" {g} (5,5) | {g} (2,2) |");
+        rule += "---:|---:|";
+    }
+    writeln!(table, "{header}\n{rule}")?;
+    let row = |label: String, k: u32, method: RefineMethod| -> String {
+        let mut line = format!("| {label} |");
+        for g in &groups {
+            let (r5, r2) = rates(&select(g, k, method));
+            line += &format!(" {:.1} | {:.1} |", 100.0 * r5, 100.0 * r2);
+        }
+        line
+    };
+    writeln!(
+        table,
+        "{}",
+        row("initial pose".into(), args.views[0], RefineMethod::Initial)
+    )?;
+    for &k in &args.views {
+        writeln!(
+            table,
+            "{}",
+            row(
+                format!("{k} view{} — SDF (ours)", if k > 1 { "s" } else { "" }),
+                k,
+                RefineMethod::Sdf
+            )
+        )?;
+        writeln!(
+            table,
+            "{}",
+            row(
+                format!("{k} view{} — ICP", if k > 1 { "s" } else { "" }),
+                k,
+                RefineMethod::Icp
+            )
+        )?;
+    }
+    writeln!(table, "\nTrials per part and view count:")?;
+    for g in &groups {
+        let counts: Vec<String> = args
+            .views
+            .iter()
+            .map(|&k| format!("{k} view(s): {}", select(g, k, RefineMethod::Sdf).len()))
+            .collect();
+        writeln!(table, "- {g}: {}", counts.join(", "))?;
+    }
+    writeln!(
+        table,
+        "\nInitial poses: {}.\n\nICP: point-to-point, k-d tree over 50 000 area-uniform model samples, 30 iterations (the SDF \
+         refiner's budget); max correspondence distance {icp_distance_mm} mm, its best 2 mm/2° rate on {} separate tuning \
+         scene(s) per part over the grid {}.\n\nSDF refiner: {:?}.\n",
+        noise.describe(),
+        args.tune_scenes,
+        tuning
+            .iter()
+            .map(|(d, h, n)| format!("{d} mm → {:.1} %", 100.0 * *h as f64 / (*n).max(1) as f64))
+            .collect::<Vec<_>>()
+            .join(", "),
+        SdfRefineConfig::default()
+    )?;
+
+    // Is the covariance honest? Mean NEES of SDF results that are correct at 5 mm/5°.
+    writeln!(
+        table,
+        "## Is the covariance honest?\n\nMean NEES of the SDF refiner's poses against its predicted covariance (eq 18), over \
+         refinements correct at 5 mm/5° (a local check: gross failures are a convergence question, not a covariance one). \
+         Degrees of freedom 6, or 5 for a continuous symmetry; the band is the 95 % interval of the mean.\n\n\
+         | part | views | n | mean NEES | dof | 95 % band | median NEES |\n|---|---:|---:|---:|---:|---|---:|"
+    )?;
+    let mut nees_csv = String::from("part,views,n,mean_nees,dof,band_lo,band_hi,median_nees\n");
+    for g in &groups {
+        for &k in &args.views {
+            let mut values: Vec<(f64, usize)> = select(g, k, RefineMethod::Sdf)
+                .iter()
+                .filter(|o| o.is_correct(&CorrectThreshold::MM5_DEG5))
+                .filter_map(|o| o.nees)
+                .collect();
+            if values.is_empty() {
+                continue;
+            }
+            values.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let n = values.len();
+            let mean = values.iter().map(|v| v.0).sum::<f64>() / n as f64;
+            let dof = values[0].1;
+            let (lo, hi) = chi2_mean_band(dof, n);
+            let median = values[n / 2].0;
+            writeln!(
+                table,
+                "| {g} | {k} | {n} | {mean:.2} | {dof} | [{lo:.2}, {hi:.2}] | {median:.2} |"
+            )?;
+            writeln!(
+                nees_csv,
+                "{g},{k},{n},{mean:.4},{dof},{lo:.4},{hi:.4},{median:.4}"
+            )?;
+        }
+    }
+    let timing: Vec<String> = [RefineMethod::Sdf, RefineMethod::Icp]
+        .iter()
+        .map(|m| {
+            let times: Vec<f64> = all
+                .iter()
+                .flat_map(|(_, o)| o.iter().filter(|o| o.method == *m).map(|o| o.time_ms))
+                .collect();
+            format!(
+                "{} {:.2} ms",
+                m.name(),
+                times.iter().sum::<f64>() / times.len().max(1) as f64
+            )
+        })
+        .collect();
+    writeln!(
+        table,
+        "\nMean time per refinement (all cores): {}.",
+        timing.join(", ")
+    )?;
+
+    for (name, text) in [
+        ("results.csv", &csv),
+        ("trials.csv", &trials_csv),
+        ("nees.csv", &nees_csv),
+        ("table.md", &table),
+    ] {
+        let path = args.out.join(name);
+        write_file_atomically(&path, text.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(table)
+}
