@@ -234,8 +234,8 @@ impl MockSliCamera<'_> {
             record(&right_camera, seed ^ 0xA5A5),
         );
         let patterns: Vec<Pattern> = (0..shots).map(|k| self.shot_pattern(k)).collect();
-        let left: Vec<Image<f32>> = patterns.iter().map(|p| left_record.radiance(p)).collect();
-        let right = patterns.iter().map(|p| right_record.radiance(p)).collect();
+        let left = left_record.radiances(&patterns);
+        let right = right_record.radiances(&patterns);
         RenderedShots {
             truth: CaptureTruth {
                 left_radiance: left[0].clone(),

@@ -26,7 +26,7 @@ use glint_geometry::image::Image;
 use rayon::prelude::*;
 
 use crate::integrator::{Camera, DirectSink, RenderOutput, RenderSettings, render_with_sinks};
-use crate::projector::{Pattern, Projector};
+use crate::projector::{BilinearTaps, Pattern, Projector};
 use crate::scene::Scene;
 
 /// One next-event term of a pixel's paths: where it reaches the projector and what it carries
@@ -177,6 +177,69 @@ impl PatternRecord {
         image
     }
 
+    /// The radiance images under each of `patterns`, as [`Self::radiance`] gives them (bit for
+    /// bit), in one pass over the record: each term's texel taps are found once for all
+    /// patterns of one texture size.
+    pub fn radiances(&self, patterns: &[Pattern]) -> Vec<Image<f32>> {
+        let Some(Pattern::Texture(first)) = patterns.first() else {
+            return patterns.iter().map(|p| self.radiance(p)).collect();
+        };
+        let (tw, th) = (first.width(), first.height());
+        let same_size = patterns
+            .iter()
+            .all(|p| matches!(p, Pattern::Texture(t) if (t.width(), t.height()) == (tw, th)));
+        if !same_size {
+            return patterns.iter().map(|p| self.radiance(p)).collect();
+        }
+        let texels: Vec<&[f32]> = patterns
+            .iter()
+            .filter_map(|p| match p {
+                Pattern::Texture(t) => Some(t.data()),
+                Pattern::White => None,
+            })
+            .collect();
+        let k = texels.len();
+        let w = self.width as usize;
+        let (pw, ph) = (
+            self.projector_intrinsics.width_px as f64,
+            self.projector_intrinsics.height_px as f64,
+        );
+        // Pixel-interleaved: K values per pixel, one row at a time.
+        let mut interleaved = vec![0f32; w * self.rows.len() * k];
+        interleaved
+            .par_chunks_mut((w * k).max(1))
+            .zip(self.rows.par_iter())
+            .for_each(|(out, row)| {
+                let mut start = 0usize;
+                for (values, &end) in out.chunks_exact_mut(k).zip(&row.column_end) {
+                    let end = end as usize;
+                    for hit in &row.hits[start..end] {
+                        let uv = nalgebra::Point2::new(hit.u_px as f64, hit.v_px as f64);
+                        // Outside the frustum the transmittance is 0 (as in `transmittance`).
+                        if !(uv.x >= 0.0 && uv.x < pw && uv.y >= 0.0 && uv.y < ph) {
+                            continue;
+                        }
+                        let taps = BilinearTaps::new(uv, &self.projector_intrinsics, tw, th);
+                        for (value, texels) in values.iter_mut().zip(&texels) {
+                            *value += hit.radiance * taps.sample(texels);
+                        }
+                    }
+                    start = end;
+                }
+            });
+        (0..k)
+            .map(|shot| {
+                let mut image = self.depth_m.clone();
+                image
+                    .data_mut()
+                    .iter_mut()
+                    .zip(interleaved.iter().skip(shot).step_by(k))
+                    .for_each(|(out, &v)| *out = v);
+                image
+            })
+            .collect()
+    }
+
     /// [`crate::integrator::render`]'s output under `pattern`, from the record.
     pub fn render(&self, pattern: &Pattern) -> RenderOutput {
         RenderOutput {
@@ -312,6 +375,13 @@ mod tests {
             }
             assert!(lit > 1000, "{lit}");
             assert_eq!(direct.label.data(), record.label.data());
+        }
+        // All patterns in one pass: the same images, bit for bit.
+        let shots: Vec<Pattern> = (0..3)
+            .map(|k| Pattern::random_dots(128, 100, 0.5, 20 + k))
+            .collect();
+        for (one_pass, pattern) in record.radiances(&shots).iter().zip(&shots) {
+            assert_eq!(one_pass.data(), record.radiance(pattern).data());
         }
         // Linear in the pattern: a pattern and its complement add up to white.
         let Pattern::Texture(dots) = Pattern::random_dots(128, 100, 0.5, 9) else {
