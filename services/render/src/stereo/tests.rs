@@ -1020,8 +1020,11 @@ fn near_depth_edges_marks_steps_and_hole_borders_within_the_radius() {
     assert_eq!(near.iter().filter(|&&n| n).count(), 5); // the hole and its 4 neighbours
 }
 
+/// A rectified (left, right) pair.
+type Pair = (Image<f32>, Image<f32>);
+
 /// K shots of a plane under K independent patterns: one pair per pattern seed.
-fn plane_sequence(rig: &StereoRig, shots: u64) -> (Scene, Vec<(Image<f32>, Image<f32>)>) {
+fn plane_sequence(rig: &StereoRig, shots: u64) -> (Scene, Vec<Pair>) {
     let planes = || {
         vec![Plane::from_point_normal(
             rig,
@@ -1036,7 +1039,7 @@ fn plane_sequence(rig: &StereoRig, shots: u64) -> (Scene, Vec<(Image<f32>, Image
 }
 
 fn match_sequence(
-    pairs: &[(Image<f32>, Image<f32>)],
+    pairs: &[Pair],
     config: &StereoMatcherConfig,
 ) -> StereoResult {
     let left: Vec<&Image<f32>> = pairs.iter().map(|p| &p.0).collect();

@@ -17,7 +17,7 @@ pub(super) struct WindowStats {
 impl WindowStats {
     pub fn compute(data: &[f32], width: usize, height: usize, radius: usize, min_std: f32) -> Self {
         let plane = width * height;
-        let shots = if plane == 0 { 1 } else { data.len() / plane };
+        let shots = data.len().checked_div(plane).unwrap_or(1);
         debug_assert_eq!(data.len(), plane * shots);
         let mut sum = vec![0.0f32; width * height];
         let mut inv_norm = vec![0.0f32; width * height];
