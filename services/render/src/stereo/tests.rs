@@ -1038,10 +1038,7 @@ fn plane_sequence(rig: &StereoRig, shots: u64) -> (Scene, Vec<Pair>) {
     (scene(W, H, planes(), vec![], 40), pairs)
 }
 
-fn match_sequence(
-    pairs: &[Pair],
-    config: &StereoMatcherConfig,
-) -> StereoResult {
+fn match_sequence(pairs: &[Pair], config: &StereoMatcherConfig) -> StereoResult {
     let left: Vec<&Image<f32>> = pairs.iter().map(|p| &p.0).collect();
     let right: Vec<&Image<f32>> = pairs.iter().map(|p| &p.1).collect();
     match_stereo_sequence(&left, &right, config, None).unwrap()
