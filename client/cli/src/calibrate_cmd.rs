@@ -11,7 +11,8 @@ use glint_calibration::bsdf_fit::{
     FREE_NAMES, FitConfig, FitProblem, FitTarget, FitView, Loss, MeasuredTarget, PixelRendering,
     Residual, StartFits, error_map_png, fit_history_png, free_of, measured_target,
 };
-use glint_calibration::material_map::{params_from_map, params_to_map};
+use glint_calibration::material_file::{GroundTruthMaterials, MaterialFile, MaterialFileError};
+use glint_calibration::material_map::params_to_map;
 use glint_calibration::response::{
     DebevecConfig, ExposureStack, ResponseTable, calibrate, response_png,
 };
@@ -155,8 +156,8 @@ pub struct EvalBsdfArgs {
     /// A material written by `glint calibrate bsdf`.
     #[arg(long)]
     pub material: PathBuf,
-    /// Ground-truth material: the capture's `glint/gt_materials.json` (the default) or a
-    /// name → value JSON.
+    /// Ground-truth material: the capture's `glint/gt_materials.json` (the default), another
+    /// capture's, or a material file.
     #[arg(long)]
     pub gt_material: Option<PathBuf>,
     /// The held-out view (image id); default: the first view the fit did not use.
@@ -328,8 +329,6 @@ fn eval_response(args: &EvalResponseArgs) -> anyhow::Result<()> {
 }
 
 /// Format tag of a fitted material file.
-const MATERIAL_FORMAT: &str = "glint-material/1";
-
 fn stem_with(path: &Path, suffix: &str) -> PathBuf {
     let stem = path
         .file_stem()
@@ -495,12 +494,10 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
             })
         })
         .collect();
-    let json = serde_json::json!({
-        "format": MATERIAL_FORMAT,
+    let provenance = serde_json::json!({
         "scene": loaded.scene_dir,
         "obj_id": loaded.obj_id,
         "views": args.views,
-        "params": params_to_map(&result.params),
         "free": FREE_NAMES,
         "transport": format!("{:?}", rendering.transport),
         "samples_per_pixel": rendering.samples_per_pixel,
@@ -534,7 +531,10 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
             0.25,
         )?,
     )?;
-    write_file_atomically(&args.out, &serde_json::to_vec_pretty(&json)?)?;
+    let serde_json::Value::Object(provenance) = provenance else {
+        unreachable!("a JSON object literal")
+    };
+    MaterialFile::new(&result.params, provenance).save(&args.out)?;
     println!(
         "bsdf: {} — {} part instances, views {:?}: {} object pixels in the loss",
         loaded.scene_dir.display(),
@@ -648,44 +648,22 @@ fn median_abs_log_ratio(a: &[f32], b: &[f32]) -> f64 {
     )
 }
 
-/// Reads a JSON file.
-fn read_json(path: &Path) -> anyhow::Result<serde_json::Value> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))
-}
-
-/// Principled parameters in `value`: a name → value map, or one under `params`, or the
-/// capture's `gt_materials.json` (`part_material` in the order of `parameter_names`).
-fn params_in(value: &serde_json::Value, path: &Path) -> anyhow::Result<PrincipledParams<f32>> {
-    let where_ = path.display().to_string();
-    let map: std::collections::BTreeMap<String, f32> = if let (Some(values), Some(names)) =
-        (value.get("part_material"), value.get("parameter_names"))
-    {
-        let values: Vec<f32> = serde_json::from_value(values.clone())
-            .with_context(|| format!("{where_}: part_material is not a list of numbers"))?;
-        let names: Vec<String> = serde_json::from_value(names.clone())
-            .with_context(|| format!("{where_}: parameter_names is not a list of names"))?;
-        if names.len() != values.len() {
-            anyhow::bail!(
-                "{where_}: {} parameter_names but {} part_material values",
-                names.len(),
-                values.len()
-            );
-        }
-        names.into_iter().zip(values).collect()
-    } else {
-        let map = value.get("params").unwrap_or(value).clone();
-        serde_json::from_value(map).with_context(|| format!("{where_}: not a parameter map"))?
-    };
-    params_from_map(&map, &where_).map_err(anyhow::Error::msg)
+/// The true material for `eval-bsdf` and the part's name when known: a capture's
+/// `gt_materials.json` (its part), or a material file.
+fn read_truth(path: &Path) -> anyhow::Result<(PrincipledParams<f32>, Option<String>)> {
+    match GroundTruthMaterials::load(path) {
+        Ok(gt) => Ok((gt.part_params()?, Some(gt.part))),
+        Err(MaterialFileError::Malformed { .. }) => Ok((MaterialFile::load(path)?.params()?, None)),
+        Err(e) => Err(e.into()),
+    }
 }
 
 fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
     let loaded = calibration_scene::load(&args.scene)?;
-    let material_json = read_json(&args.material)?;
-    let fitted = params_in(&material_json, &args.material)?;
-    let fitted_views: Vec<u32> = material_json
+    let material = MaterialFile::load(&args.material)?;
+    let fitted = material.params()?;
+    let fitted_views: Vec<u32> = material
+        .provenance
         .get("views")
         .map(|v| serde_json::from_value(v.clone()))
         .transpose()
@@ -700,8 +678,7 @@ fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
         .gt_material
         .clone()
         .unwrap_or_else(|| loaded.scene_dir.join("glint").join("gt_materials.json"));
-    let gt_json = read_json(&gt_path)?;
-    let truth = params_in(&gt_json, &gt_path)?;
+    let (truth, part_name) = read_truth(&gt_path)?;
     let held_out = match args.held_out_view {
         Some(im_id) => im_id,
         None => loaded
@@ -767,10 +744,7 @@ fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
             "  L2 loss against the measured radiance of views {fitted_views:?}: fitted {loss_fitted:.4}, true material {loss_truth:.4}"
         );
     }
-    let part = gt_json
-        .get("part")
-        .and_then(|p| p.as_str())
-        .map_or_else(|| format!("obj {}", loaded.obj_id), str::to_owned);
+    let part = part_name.unwrap_or_else(|| format!("obj {}", loaded.obj_id));
     let fitted_mean = if errors.len() > 1 {
         errors[..errors.len() - 1].iter().sum::<f64>() / (errors.len() - 1) as f64
     } else {

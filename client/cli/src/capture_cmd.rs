@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
+use glint_calibration::material_file::GroundTruthMaterials;
 use glint_camera::capture::{
     CaptureTruth, DepthQuality, MockSliCamera, StereoCapture, depth_quality,
 };
@@ -147,13 +148,11 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
         args.out.join("test").join("000001"),
         BopSceneWriter::DEFAULT_DEPTH_SCALE_MM,
     )?;
-    bop.set_gt_materials(serde_json::json!({
-        "note": "ground truth of the simulator, for evaluation only; estimators must not read it",
-        "part": args.part.name(),
-        "part_material": materials::ground_truth(args.part).to_array(),
-        "bin_material": materials::bin().to_array(),
-        "parameter_names": glint_render::bsdf::PrincipledParams::<f32>::NAMES,
-    }));
+    bop.set_gt_materials(serde_json::to_value(GroundTruthMaterials::new(
+        args.part.name(),
+        materials::ground_truth(args.part),
+        materials::bin(),
+    ))?);
     // The rig as known hardware (calibration reads it) and the GT sensor (evaluation only).
     let layout = bop.layout().clone();
     std::fs::create_dir_all(layout.glint_dir())

@@ -319,7 +319,8 @@ fn bad_calibration_inputs_are_clear_errors_without_output() {
     params.as_object_mut().unwrap().remove("roughness");
     std::fs::write(
         &material,
-        serde_json::json!({"params": params, "views": [0]}).to_string(),
+        serde_json::json!({"format": "glint-material/1", "params": params, "views": [0]})
+            .to_string(),
     )
     .unwrap();
     let eval = |material: &Path| {
@@ -336,7 +337,8 @@ fn bad_calibration_inputs_are_clear_errors_without_output() {
     params["roughness"] = serde_json::json!(0.2);
     std::fs::write(
         &material,
-        serde_json::json!({"params": params, "views": [0]}).to_string(),
+        serde_json::json!({"format": "glint-material/1", "params": params, "views": [0]})
+            .to_string(),
     )
     .unwrap();
     fails_with(eval(&material), &["every view", "--held-out-view"]);

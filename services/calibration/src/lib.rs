@@ -3,9 +3,10 @@
 //!   and radiance maps E = g⁻¹(I)/Δt;
 //! - [`bsdf_fit`]: principled-BSDF parameters by differentiable rendering (dual numbers
 //!   through the renderer's own single- or multi-path tracing), L2 loss, Adam;
-//! - principled parameters as name → value maps ([`material_map`]) and plots as PNG ([`plot`]).
+//! - principled parameters as name → value maps ([`material_map`]), the material files
+//!   ([`material_file`]: fitted, and the mock camera's ground truth).
 
 pub mod bsdf_fit;
+pub mod material_file;
 pub mod material_map;
-pub mod plot;
 pub mod response;

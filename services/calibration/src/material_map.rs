@@ -12,24 +12,46 @@ pub fn params_to_map(p: &PrincipledParams<f32>) -> std::collections::BTreeMap<St
         .collect()
 }
 
+/// Why a parameter map is not a material.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MaterialMapError {
+    #[error("{field}: unknown parameter {name:?}")]
+    Unknown { field: String, name: String },
+    #[error("{field}: missing parameter {name:?}")]
+    Missing { field: String, name: &'static str },
+    #[error("{field}: {source}")]
+    OutOfRange {
+        field: String,
+        #[source]
+        source: glint_render::bsdf::InvalidParameter,
+    },
+}
+
 /// The inverse of [`params_to_map`], validated; `field` names the map in errors.
 pub fn params_from_map(
     map: &std::collections::BTreeMap<String, f32>,
     field: &str,
-) -> Result<PrincipledParams<f32>, String> {
+) -> Result<PrincipledParams<f32>, MaterialMapError> {
     if let Some(unknown) = map
         .keys()
         .find(|k| !PrincipledParams::<f32>::NAMES.contains(&k.as_str()))
     {
-        return Err(format!("{field}: unknown parameter {unknown:?}"));
+        return Err(MaterialMapError::Unknown {
+            field: field.into(),
+            name: unknown.clone(),
+        });
     }
     let mut values = [0f32; glint_render::bsdf::PARAMETER_COUNT];
     for (v, name) in values.iter_mut().zip(PrincipledParams::<f32>::NAMES) {
-        *v = *map
-            .get(name)
-            .ok_or_else(|| format!("{field}: missing parameter {name:?}"))?;
+        *v = *map.get(name).ok_or_else(|| MaterialMapError::Missing {
+            field: field.into(),
+            name,
+        })?;
     }
     PrincipledParams::from_array(values)
         .validated()
-        .map_err(|e| format!("{field}: {e}"))
+        .map_err(|source| MaterialMapError::OutOfRange {
+            field: field.into(),
+            source,
+        })
 }

@@ -55,15 +55,17 @@ pub struct SdfRefineConfig {
     pub model_sigma_m: f64,
     /// Inliers for the covariance: whitened residual within this at the solution. Default 3.
     pub inlier_k: f64,
-    /// Converged when the step is below this in translation (m) and in rotation (rad).
-    /// Default 1 µm and 1 µrad, as Glint's ICP: far below the depth noise, and a damped step
-    /// this small is not worth another pass over the points.
-    pub step_tolerance: f64,
+    /// Converged when the step's translation is below this (m) and its rotation below
+    /// `step_tolerance_rad`. Default 1 µm and 1 µrad, as Glint's ICP: far below the depth
+    /// noise, and a damped step this small is not worth another pass over the points.
+    pub step_tolerance_m: f64,
+    /// The rotation half of the step test, radians.
+    pub step_tolerance_rad: f64,
     /// Converged when a step the cost rejects is shorter than this many standard deviations
     /// of the pose's own uncertainty, `√(δᵀ H δ)` with H the robust information of eq 9.
     /// Default 1: the trilinear SDF makes the truncated cost rough at that scale, and damping
     /// such a step further would cost a pass over the points per try for a change the data
-    /// cannot resolve. Accepted steps go on down to `step_tolerance`.
+    /// cannot resolve. Accepted steps go on down to the step tolerances.
     pub step_sigma_tolerance: f64,
     /// A pose whose object origin moves further than this in the world from the initial
     /// one (m) has diverged. Default 50 mm: far beyond the 30 mm an initial pose may be off.
@@ -86,7 +88,8 @@ impl Default for SdfRefineConfig {
             huber_k: 2.0,
             model_sigma_m: 0.3e-3,
             inlier_k: 3.0,
-            step_tolerance: 1e-6,
+            step_tolerance_m: 1e-6,
+            step_tolerance_rad: 1e-6,
             step_sigma_tolerance: 1.0,
             max_translation_change_m: 50e-3,
             min_inliers: 12,
@@ -334,8 +337,9 @@ fn accumulate(
 
 /// A step below `tolerance` in translation (m) and in rotation (rad).
 #[inline]
-fn is_below(step: &Vector6<f64>, tolerance: f64) -> bool {
-    step.fixed_rows::<3>(0).norm() < tolerance && step.fixed_rows::<3>(3).norm() < tolerance
+fn is_below(step: &Vector6<f64>, config: &SdfRefineConfig) -> bool {
+    step.fixed_rows::<3>(0).norm() < config.step_tolerance_m
+        && step.fixed_rows::<3>(3).norm() < config.step_tolerance_rad
 }
 
 /// The squared length of `step` in standard deviations of a pose with information `h`.
@@ -475,7 +479,7 @@ pub fn refine_sdf(
                     lambda *= 10.0;
                     continue;
                 };
-                if is_below(&step, config.step_tolerance) {
+                if is_below(&step, config) {
                     break; // not worth a pass over the points: a minimum
                 }
                 let candidate = se3::perturb_left(&step, &t_o_w);
@@ -497,7 +501,7 @@ pub fn refine_sdf(
                 status = RefineStatus::Converged;
                 break;
             };
-            let small = is_below(&step, config.step_tolerance);
+            let small = is_below(&step, config);
             t_o_w = candidate;
             normal = trial;
             lambda = (lambda * 0.1).max(1e-7);

@@ -6,7 +6,6 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use glint_calibration::plot::{FONT, padded_range, png};
 use glint_camera::capture::{CaptureTruth, StereoCapture};
 use glint_camera::materials;
 use glint_camera::setup::{BinSetup, BinSetupSpec};
@@ -14,6 +13,7 @@ use glint_estimation::depth_sigma::{NoiseModel, depth_sigma};
 use glint_geometry::Part;
 use glint_geometry::image::normalised_intensity;
 use glint_geometry::io::write_file_atomically;
+use glint_plot::{FONT, padded_range, png};
 use plotters::prelude::*;
 
 #[derive(clap::Args)]

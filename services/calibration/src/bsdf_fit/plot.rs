@@ -4,7 +4,7 @@
 use plotters::prelude::*;
 
 use super::{FREE, FREE_NAMES, FitResult};
-use crate::plot::{FONT, PlotError, encode_rgb_png, padded_range, png};
+use glint_plot::{FONT, PlotError, encode_rgb_png, padded_range, png};
 
 const COLOURS: [RGBColor; FREE] = [
     RGBColor(31, 119, 180),

@@ -3,7 +3,7 @@
 use plotters::prelude::*;
 
 use super::ResponseTable;
-use crate::plot::{FONT, PlotError, padded_range, png};
+use glint_plot::{FONT, PlotError, padded_range, png};
 
 /// PNG of the recovered g (DN over ln X) and, if given, a reference curve as (ln X, DN) points
 /// already expressed in the recovered exposure unit.

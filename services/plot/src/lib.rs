@@ -1,5 +1,6 @@
-//! PNG plots with plotters' bitmap backend and an embedded font (DejaVu Sans Mono, in
-//! `assets/`), so plotting needs no system fonts.
+//! Glint's one home for plots: PNG plots with plotters' bitmap backend and an embedded font
+//! (DejaVu Sans Mono, in `assets/`), so plotting needs no system fonts. Every report (the
+//! calibration's, the experiments', the demo's) draws through [`png`].
 
 use std::sync::Once;
 
@@ -19,10 +20,17 @@ fn register_font() {
     });
 }
 
-/// A drawing error, as text (plotters' errors borrow their backend).
+/// Why a plot could not be made (plotters' errors borrow their backend, so they are kept as
+/// text).
 #[derive(Debug, thiserror::Error)]
-#[error("plotting failed: {0}")]
-pub struct PlotError(pub String);
+pub enum PlotError {
+    /// Drawing on the canvas failed (e.g. a degenerate axis range).
+    #[error("plotting failed: {0}")]
+    Draw(String),
+    /// The finished image could not be encoded as PNG.
+    #[error("encoding the plot as PNG failed: {0}")]
+    Encode(String),
+}
 
 /// The area a plot draws on.
 pub type Canvas<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
@@ -37,9 +45,10 @@ pub fn png(
     let mut rgb = vec![255u8; (width * height * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (width, height)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| PlotError(e.to_string()))?;
-        draw(&root).map_err(|e| PlotError(e.to_string()))?;
-        root.present().map_err(|e| PlotError(e.to_string()))?;
+        root.fill(&WHITE)
+            .map_err(|e| PlotError::Draw(e.to_string()))?;
+        draw(&root).map_err(|e| PlotError::Draw(e.to_string()))?;
+        root.present().map_err(|e| PlotError::Draw(e.to_string()))?;
     }
     encode_rgb_png(&rgb, width, height)
 }
@@ -50,7 +59,7 @@ pub fn encode_rgb_png(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>, Pl
     let mut out = Vec::new();
     image::codecs::png::PngEncoder::new(&mut out)
         .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
-        .map_err(|e| PlotError(e.to_string()))?;
+        .map_err(|e| PlotError::Encode(e.to_string()))?;
     Ok(out)
 }
 

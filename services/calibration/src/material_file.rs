@@ -1,0 +1,246 @@
+//! Material files, one type each: the fitted material `glint calibrate bsdf` writes (and the
+//! uncertainty predictor reads), and the mock camera's ground-truth materials beside a capture
+//! (evaluation only).
+//!
+//! ```json
+//! { "format": "glint-material/1",
+//!   "params": { "base_color": 0.78, "metallic": 1.0, "roughness": 0.16, ... },
+//!   ... provenance of the fit (scene, views, loss, ...) ... }
+//! ```
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use glint_geometry::io::write_file_atomically;
+use glint_render::bsdf::PrincipledParams;
+use serde::{Deserialize, Serialize};
+
+use crate::material_map::{MaterialMapError, params_from_map, params_to_map};
+
+/// The `format` of a fitted material file.
+pub const MATERIAL_FORMAT: &str = "glint-material/1";
+
+/// Why a material file could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum MaterialFileError {
+    #[error("cannot read {}: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Write(#[from] glint_geometry::io::AtomicWriteError),
+    #[error("{}: not a material file: {problem}", path.display())]
+    Malformed { path: PathBuf, problem: String },
+    #[error("{}: format {found:?}, expected {MATERIAL_FORMAT:?}", path.display())]
+    Format { path: PathBuf, found: String },
+    #[error("{}: {source}", path.display())]
+    Params {
+        path: PathBuf,
+        #[source]
+        source: MaterialMapError,
+    },
+}
+
+/// A fitted material: its principled parameters and, free-form, how it was obtained.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MaterialFile {
+    pub format: String,
+    /// Every name of [`PrincipledParams::NAMES`], each in [0, 1].
+    pub params: BTreeMap<String, f32>,
+    /// Provenance (scene, views, loss, timings ...), kept as written.
+    #[serde(flatten)]
+    pub provenance: serde_json::Map<String, serde_json::Value>,
+}
+
+impl MaterialFile {
+    pub fn new(
+        params: &PrincipledParams<f32>,
+        provenance: serde_json::Map<String, serde_json::Value>,
+    ) -> Self {
+        Self {
+            format: MATERIAL_FORMAT.into(),
+            params: params_to_map(params),
+            provenance,
+        }
+    }
+
+    /// Reads and validates `path`: the format, every parameter present and in range.
+    pub fn load(path: &Path) -> Result<Self, MaterialFileError> {
+        let file: Self = read_json(path)?;
+        if file.format != MATERIAL_FORMAT {
+            return Err(MaterialFileError::Format {
+                path: path.into(),
+                found: file.format,
+            });
+        }
+        file.params_at(path)?;
+        Ok(file)
+    }
+
+    /// Writes the file atomically (a reader never sees half of it).
+    pub fn save(&self, path: &Path) -> Result<(), MaterialFileError> {
+        write_json(path, self)
+    }
+
+    /// The principled parameters, validated.
+    pub fn params(&self) -> Result<PrincipledParams<f32>, MaterialMapError> {
+        params_from_map(&self.params, "params")
+    }
+
+    fn params_at(&self, path: &Path) -> Result<PrincipledParams<f32>, MaterialFileError> {
+        self.params().map_err(|source| MaterialFileError::Params {
+            path: path.into(),
+            source,
+        })
+    }
+}
+
+/// The mock camera's ground truth beside a capture (`glint/gt_materials.json`): the part's and
+/// the bin's materials. Evaluation only: estimators and predictors never read it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GroundTruthMaterials {
+    pub note: String,
+    /// The part's name.
+    pub part: String,
+    pub part_material: BTreeMap<String, f32>,
+    pub bin_material: BTreeMap<String, f32>,
+}
+
+impl GroundTruthMaterials {
+    pub fn new(part_name: &str, part: PrincipledParams<f32>, bin: PrincipledParams<f32>) -> Self {
+        Self {
+            note: "ground truth of the simulator, for evaluation only; estimators must not read it"
+                .into(),
+            part: part_name.into(),
+            part_material: params_to_map(&part),
+            bin_material: params_to_map(&bin),
+        }
+    }
+
+    pub fn load(path: &Path) -> Result<Self, MaterialFileError> {
+        let file: Self = read_json(path)?;
+        file.part_params_at(path)?;
+        params_from_map(&file.bin_material, "bin_material").map_err(|source| {
+            MaterialFileError::Params {
+                path: path.into(),
+                source,
+            }
+        })?;
+        Ok(file)
+    }
+
+    pub fn save(&self, path: &Path) -> Result<(), MaterialFileError> {
+        write_json(path, self)
+    }
+
+    /// The part's parameters, validated.
+    pub fn part_params(&self) -> Result<PrincipledParams<f32>, MaterialMapError> {
+        params_from_map(&self.part_material, "part_material")
+    }
+
+    fn part_params_at(&self, path: &Path) -> Result<PrincipledParams<f32>, MaterialFileError> {
+        self.part_params()
+            .map_err(|source| MaterialFileError::Params {
+                path: path.into(),
+                source,
+            })
+    }
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, MaterialFileError> {
+    let text = std::fs::read_to_string(path).map_err(|source| MaterialFileError::Read {
+        path: path.into(),
+        source,
+    })?;
+    serde_json::from_str(&text).map_err(|e| MaterialFileError::Malformed {
+        path: path.into(),
+        problem: e.to_string(),
+    })
+}
+
+fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), MaterialFileError> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| MaterialFileError::Malformed {
+        path: path.into(),
+        problem: e.to_string(),
+    })?;
+    Ok(write_file_atomically(path, text.as_bytes())?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn gear() -> PrincipledParams<f32> {
+        PrincipledParams {
+            base_color: 0.78,
+            metallic: 1.0,
+            roughness: 0.16,
+            ..PrincipledParams::default()
+        }
+    }
+
+    #[test]
+    fn files_round_trip_and_keep_their_provenance() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("material.json");
+        let mut provenance = serde_json::Map::new();
+        provenance.insert("views".into(), serde_json::json!([0, 1]));
+        let file = MaterialFile::new(&gear(), provenance);
+        file.save(&path).unwrap();
+        let read = MaterialFile::load(&path).unwrap();
+        assert_eq!(read, file);
+        assert_eq!(read.params().unwrap(), gear());
+        assert_eq!(read.provenance["views"], serde_json::json!([0, 1]));
+
+        let gt_path = dir.path().join("gt_materials.json");
+        let gt = GroundTruthMaterials::new("gear", gear(), PrincipledParams::default());
+        gt.save(&gt_path).unwrap();
+        assert_eq!(
+            GroundTruthMaterials::load(&gt_path)
+                .unwrap()
+                .part_params()
+                .unwrap(),
+            gear()
+        );
+    }
+
+    #[test]
+    fn bad_files_name_the_problem() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.json");
+        let missing = MaterialFile::load(&path).unwrap_err();
+        assert!(
+            matches!(missing, MaterialFileError::Read { .. }),
+            "{missing}"
+        );
+        std::fs::write(&path, "{ \"format\": ").unwrap();
+        let truncated = MaterialFile::load(&path).unwrap_err();
+        assert!(
+            matches!(truncated, MaterialFileError::Malformed { .. }),
+            "{truncated}"
+        );
+        let mut file = MaterialFile::new(&gear(), serde_json::Map::new());
+        file.params.insert("roughness".into(), 1.5);
+        file.save(&path).unwrap();
+        let out_of_range = MaterialFile::load(&path).unwrap_err();
+        assert!(
+            out_of_range.to_string().contains("roughness"),
+            "{out_of_range}"
+        );
+        file.params.remove("roughness");
+        file.save(&path).unwrap();
+        let err = MaterialFile::load(&path).unwrap_err();
+        assert!(
+            err.to_string().contains("missing parameter \"roughness\""),
+            "{err}"
+        );
+        file.format = "other/2".into();
+        file.save(&path).unwrap();
+        assert!(matches!(
+            MaterialFile::load(&path).unwrap_err(),
+            MaterialFileError::Format { .. }
+        ));
+    }
+}
