@@ -25,7 +25,7 @@
 use glint_geometry::LengthUnit;
 use glint_geometry::camera::{CameraError, PinholeIntrinsics, StereoRig};
 use glint_geometry::image::{DepthMap, Image};
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Matrix6, Quaternion, Translation3, UnitQuaternion};
 
 use crate::v1;
 
@@ -692,10 +692,68 @@ impl v1::MeshRef {
     }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Information and covariance matrices
+
+/// Entries of a symmetric 6×6 matrix's upper triangle.
+const UPPER_6: usize = 21;
+
+impl TryFrom<&v1::SymmetricMatrix6> for Matrix6<f64> {
+    type Error = ConversionError;
+    fn try_from(m: &v1::SymmetricMatrix6) -> Result<Self, Self::Error> {
+        if m.upper.len() != UPPER_6 {
+            return Err(ConversionError::new(
+                "upper",
+                format!(
+                    "has {} values; a symmetric 6x6 matrix needs its 21 upper-triangle entries",
+                    m.upper.len()
+                ),
+            ));
+        }
+        let mut out = Matrix6::zeros();
+        let mut values = m.upper.iter();
+        for i in 0..6 {
+            for j in i..6 {
+                let v = finite("upper", *values.next().unwrap_or(&f64::NAN))?;
+                out[(i, j)] = v;
+                out[(j, i)] = v;
+            }
+        }
+        Ok(out)
+    }
+}
+
+impl From<&Matrix6<f64>> for v1::SymmetricMatrix6 {
+    /// The upper triangle of the symmetric part `(M + Mᵀ)/2`.
+    fn from(m: &Matrix6<f64>) -> Self {
+        let upper = (0..6)
+            .flat_map(|i| (i..6).map(move |j| (i, j)))
+            .map(|(i, j)| 0.5 * (m[(i, j)] + m[(j, i)]))
+            .collect();
+        v1::SymmetricMatrix6 { upper }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use nalgebra::Vector3;
+
+    #[test]
+    fn symmetric_matrices_round_trip_and_reject_bad_input() {
+        let a = Matrix6::from_fn(|i, j| (i * 6 + j) as f64 * 0.25 - 3.0);
+        let sym = 0.5 * (a + a.transpose());
+        let msg = v1::SymmetricMatrix6::from(&a);
+        assert_eq!(msg.upper.len(), 21);
+        assert_eq!(Matrix6::try_from(&msg).unwrap(), sym);
+        let short = v1::SymmetricMatrix6 {
+            upper: vec![1.0; 20],
+        };
+        assert_field(Matrix6::try_from(&short), "upper", "21");
+        let mut nan = msg.clone();
+        nan.upper[7] = f64::NAN;
+        assert_field(Matrix6::try_from(&nan), "upper", "finite");
+    }
 
     fn pose_msg() -> v1::Pose {
         let t = Isometry3::new(

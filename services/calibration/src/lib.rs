@@ -6,6 +6,8 @@
 //! - principled parameters as name → value maps ([`material_map`]), the material files
 //!   ([`material_file`]: fitted, and the mock camera's ground truth).
 
+#![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+
 pub mod bsdf_fit;
 pub mod material_file;
 pub mod material_map;

@@ -75,7 +75,7 @@ impl MaterialFile {
                 found: file.format,
             });
         }
-        file.params_at(path)?;
+        validated(path, &file.params, "params")?;
         Ok(file)
     }
 
@@ -87,13 +87,6 @@ impl MaterialFile {
     /// The principled parameters, validated.
     pub fn params(&self) -> Result<PrincipledParams<f32>, MaterialMapError> {
         params_from_map(&self.params, "params")
-    }
-
-    fn params_at(&self, path: &Path) -> Result<PrincipledParams<f32>, MaterialFileError> {
-        self.params().map_err(|source| MaterialFileError::Params {
-            path: path.into(),
-            source,
-        })
     }
 }
 
@@ -121,13 +114,8 @@ impl GroundTruthMaterials {
 
     pub fn load(path: &Path) -> Result<Self, MaterialFileError> {
         let file: Self = read_json(path)?;
-        file.part_params_at(path)?;
-        params_from_map(&file.bin_material, "bin_material").map_err(|source| {
-            MaterialFileError::Params {
-                path: path.into(),
-                source,
-            }
-        })?;
+        validated(path, &file.part_material, "part_material")?;
+        validated(path, &file.bin_material, "bin_material")?;
         Ok(file)
     }
 
@@ -139,14 +127,18 @@ impl GroundTruthMaterials {
     pub fn part_params(&self) -> Result<PrincipledParams<f32>, MaterialMapError> {
         params_from_map(&self.part_material, "part_material")
     }
+}
 
-    fn part_params_at(&self, path: &Path) -> Result<PrincipledParams<f32>, MaterialFileError> {
-        self.part_params()
-            .map_err(|source| MaterialFileError::Params {
-                path: path.into(),
-                source,
-            })
-    }
+/// The parameter map `field` of the file at `path`, validated.
+fn validated(
+    path: &Path,
+    map: &BTreeMap<String, f32>,
+    field: &str,
+) -> Result<PrincipledParams<f32>, MaterialFileError> {
+    params_from_map(map, field).map_err(|source| MaterialFileError::Params {
+        path: path.into(),
+        source,
+    })
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, MaterialFileError> {

@@ -10,6 +10,8 @@
 //! Evaluation code reads ground truth (to draw initial poses and to score); nothing that
 //! estimates or predicts may depend on this crate.
 
+#![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+
 pub mod metrics;
 pub mod progress;
 pub mod scenes;

@@ -365,22 +365,19 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
     //    the tuning scenes.
     let mut tuning: Vec<(f64, usize, usize)> = Vec::new(); // (distance, hits 2/2, n)
     let mut tune_trials = Vec::new();
-    for (object, _) in objects.iter().zip(&refiners) {
+    for (index, object) in objects.iter().enumerate() {
         for s in 0..args.tune_scenes {
             let seed = tune_seed(s);
             let dir = ensure_scene(&scene_root, object, seed, &spec)?;
-            tune_trials.push((object.clone(), seed, dir));
+            tune_trials.push((index, seed, dir));
         }
     }
     let bar = crate::progress::bar(tune_trials.len() as u64, "tune icp");
     let mut per_distance = vec![(0usize, 0usize); args.icp_distances_mm.len()];
-    for (object, seed, dir) in &tune_trials {
-        let index = objects
-            .iter()
-            .position(|o| o.name == object.name)
-            .expect("listed");
+    for &(index, seed, ref dir) in &tune_trials {
+        let object = &objects[index];
         let scene = load_scene(dir, OBJ_ID, window_radius_px, erode_px)?;
-        let trials = trials_of_scene(object, *seed, &scene, &args.views, &noise, args.seed);
+        let trials = trials_of_scene(object, seed, &scene, &args.views, &noise, args.seed);
         for (d, acc) in args.icp_distances_mm.iter().zip(per_distance.iter_mut()) {
             let config = IcpConfig {
                 max_correspondence_distance_m: d * 1e-3,
@@ -413,7 +410,7 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
         .max_by(|a, b| {
             (a.1 as f64 / a.2.max(1) as f64).total_cmp(&(b.1 as f64 / b.2.max(1) as f64))
         })
-        .expect("non-empty grid");
+        .context("--icp-distances-mm: give at least one distance")?;
     let icp_config = IcpConfig {
         max_correspondence_distance_m: best.0 * 1e-3,
         ..IcpConfig::with_method(IcpMethod::PointToPoint)

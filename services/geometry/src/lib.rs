@@ -8,6 +8,8 @@
 //! - poses are perturbed on the left, `T ← exp(δ)·T`, with `δ = (ρ, φ)`, translation first;
 //! - meshes are `f32` (rendering precision), estimation is `f64`.
 
+#![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+
 pub mod camera;
 pub mod glam_interop;
 pub mod image;

@@ -423,7 +423,12 @@ impl TriMesh {
             });
         }
         let topology = EdgeTopology::of(self);
-        let (aabb_min, aabb_max) = self.aabb().expect("non-empty: checked above");
+        let Some((aabb_min, aabb_max)) = self.aabb() else {
+            return Err(MeshError::Empty {
+                vertices: n,
+                triangles: self.triangles.len(),
+            });
+        };
         Ok(MeshReport {
             vertices: n,
             triangles: self.triangles.len(),

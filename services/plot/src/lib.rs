@@ -2,6 +2,9 @@
 //! (DejaVu Sans Mono, in `assets/`), so plotting needs no system fonts. Every report (the
 //! calibration's, the experiments', the demo's) draws through [`png`].
 
+#![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+#![warn(missing_docs)]
+
 use std::sync::Once;
 
 use plotters::coord::Shift;

@@ -124,7 +124,11 @@ impl Default for FitConfig {
             beta1: 0.9,
             beta2: 0.999,
             start: 0.5,
-            fixed: PrincipledParams::new(0.5, 0.5, 0.5, 0.5).expect("constants are valid"),
+            // The default material with metallic 0.5, the paper's start.
+            fixed: PrincipledParams {
+                metallic: 0.5,
+                ..PrincipledParams::default()
+            },
             reseed: false,
             final_min_indirect_roughness: None,
         }

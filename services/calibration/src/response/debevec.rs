@@ -113,14 +113,15 @@ pub fn select_samples(stack: &ExposureStack, count: usize) -> Vec<SamplePixel> {
             let well = images
                 .iter()
                 .filter(|img| {
-                    let z = levels.of(img.get(u, v).expect("inside"));
+                    // (u, v) lies inside: the loops stop at the image size.
+                    let z = levels.of(img.get(u, v).unwrap_or(0));
                     z > 0 && z < levels.count - 1
                 })
                 .count();
             if well >= 2 {
                 let key = images
                     .iter()
-                    .map(|img| img.get(u, v).expect("inside") as u64)
+                    .map(|img| img.get(u, v).unwrap_or(0) as u64)
                     .sum();
                 candidates.push(Candidate {
                     pixel: SamplePixel { u, v },
@@ -132,11 +133,13 @@ pub fn select_samples(stack: &ExposureStack, count: usize) -> Vec<SamplePixel> {
         }
         v += step_v;
     }
-    if candidates.is_empty() || count == 0 {
+    let keys = || candidates.iter().map(|c| c.key);
+    let (Some(lo), Some(hi)) = (keys().min(), keys().max()) else {
+        return Vec::new();
+    };
+    if count == 0 {
         return Vec::new();
     }
-    let lo = candidates.iter().map(|c| c.key).min().expect("non-empty");
-    let hi = candidates.iter().map(|c| c.key).max().expect("non-empty");
     let span = (hi - lo + 1) as f64;
     let mut best: Vec<Option<usize>> = vec![None; count];
     for (i, c) in candidates.iter().enumerate() {
@@ -203,7 +206,8 @@ pub fn calibrate(
     let mut k = 0;
     for (i, s) in samples.iter().enumerate() {
         for (img, &dt) in stack.images().iter().zip(stack.exposures_s()) {
-            let z = levels.of(img.get(s.u, s.v).expect("sampled inside"));
+            // Sample pixels were chosen inside the stack's images.
+            let z = levels.of(img.get(s.u, s.v).unwrap_or(0));
             let w = levels.weight(z);
             a[(k, z)] = w;
             a[(k, n + i)] = -w;

@@ -151,7 +151,7 @@ impl ResponseTable {
                 }
             })
             .collect();
-        Ok(Image::new(w, h, data).expect("sized from the stack"))
+        Image::new(w, h, data).map_err(|e| ResponseError::Input(e.to_string()))
     }
 
     /// Compares with a known response `truth` (normalised exposure → normalised intensity) over
@@ -185,7 +185,10 @@ impl ResponseTable {
 
     /// Writes the table as pretty JSON, atomically.
     pub fn save(&self, path: &Path) -> Result<(), ResponseError> {
-        let json = serde_json::to_vec_pretty(self).expect("plain data serialises");
+        let json = serde_json::to_vec_pretty(self).map_err(|e| ResponseError::File {
+            path: path.into(),
+            message: e.to_string(),
+        })?;
         stack::write_file(path, &json)
     }
 

@@ -250,7 +250,8 @@ pub fn write_ply(
 pub fn write_ply_to_vec(mesh: &TriMesh, unit: LengthUnit, encoding: PlyEncoding) -> Vec<u8> {
     // Header plus 12 bytes a vertex and 13 a triangle in binary; ascii is about twice that.
     let mut bytes = Vec::with_capacity(256 + 12 * mesh.vertices.len() + 13 * mesh.triangles.len());
-    write_ply_to(&mut bytes, mesh, unit, encoding).expect("writing into a Vec<u8> cannot fail");
+    // Writing into a Vec<u8> cannot fail: its io::Write never errs.
+    let _ = write_ply_to(&mut bytes, mesh, unit, encoding);
     bytes
 }
 
