@@ -305,11 +305,57 @@ fn bench_render(part: Part, instances: u32, spp: u32) -> anyhow::Result<()> {
             config: CaptureConfig::for_rig(&rig)?,
         };
         let start = Instant::now();
-        let capture = camera.capture(&t_w_c, 1)?;
+        let (capture, _truth) = camera.capture(&t_w_c, 1)?;
         println!(
             "| {w}×{h} (coverage of the image: {:.2}) | {:.2} |",
             capture.depth.coverage(),
             start.elapsed().as_secs_f64()
+        );
+    }
+    bench_multi_shot(&scene, &full, &t_w_c)
+}
+
+/// The K-shot capture at 1280×1024: one path trace per camera (the pattern record) evaluated
+/// under K patterns, K read-outs per camera, one space-time match; K = 1 is the single-shot
+/// camera (direct renders). Each K at the camera's window for it.
+fn bench_multi_shot(
+    scene: &glint_render::scene::Scene,
+    rig: &glint_render::rig::SliRig,
+    t_w_c: &nalgebra::Isometry3<f64>,
+) -> anyhow::Result<()> {
+    use glint_camera::capture::{CaptureConfig, MockSliCamera};
+
+    println!(
+        "\n| K-shot capture, 1280×1024, multi-path 4 spp | window | render (s) | read-out (s) | match (s) | total (s) | total / single shot | coverage of the image |"
+    );
+    println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let mut single = f64::NAN;
+    for shots in [1u32, 2, 4, 8, 16] {
+        let config = CaptureConfig::for_rig_and_shots(rig, shots)?;
+        let side = config.matcher.window_side_px();
+        let camera = MockSliCamera {
+            rig: *rig,
+            scene,
+            config,
+        };
+        // The three stages of `capture`, timed apart.
+        let start = Instant::now();
+        let rendered = camera.render_shots(t_w_c, 1);
+        let render_s = start.elapsed().as_secs_f64();
+        let pairs = camera.read_out_shots(&rendered, 1);
+        let read_out_s = start.elapsed().as_secs_f64() - render_s;
+        let lefts: Vec<_> = pairs.iter().map(|p| &p[0]).collect();
+        let rights: Vec<_> = pairs.iter().map(|p| &p[1]).collect();
+        let (depth, _) = camera.match_shots(&lefts, &rights)?;
+        let total = start.elapsed().as_secs_f64();
+        if shots == 1 {
+            single = total;
+        }
+        println!(
+            "| {shots} | {side}×{side} | {render_s:.2} | {read_out_s:.2} | {:.2} | {total:.2} | {:.2} | {:.3} |",
+            total - render_s - read_out_s,
+            total / single,
+            depth.coverage()
         );
     }
     Ok(())

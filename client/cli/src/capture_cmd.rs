@@ -6,7 +6,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use glint_calibration::material_file::GroundTruthMaterials;
-use glint_camera::capture::{DepthQuality, MockSliCamera, StereoCapture, depth_quality};
+use glint_camera::capture::{
+    CaptureTruth, DepthQuality, MockSliCamera, StereoCapture, depth_quality,
+};
 use glint_camera::dataset::bop::{BopCamera, BopSceneWriter, write_dataset_camera, write_models};
 use glint_camera::dataset::reference_file::{ReferenceSurface, write_reference_surface_json};
 use glint_camera::dataset::rig_file::{write_gt_sensor_json, write_rig_json};
@@ -184,10 +186,12 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
     for (k, t_w_c) in views.iter().enumerate() {
         let seed = capture_seed(args.seed, k);
         let start = Instant::now();
-        let captures: Vec<StereoCapture> = cameras
+        let (captures, truths): (Vec<StereoCapture>, Vec<CaptureTruth>) = cameras
             .iter()
             .map(|(_, c)| c.capture(t_w_c, seed))
-            .collect::<Result<_, _>>()?;
+            .collect::<Result<Vec<_>, _>>()?
+            .into_iter()
+            .unzip();
         tracing::info!(
             "view {k}: two captures in {:.1} s",
             start.elapsed().as_secs_f64()
@@ -204,9 +208,13 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
             &captures[0].right,
             cameras[0].1.config.sensor.max_dn(),
         )?;
-        write_depth(&dir.join("depth.png"), &captures[0])?;
-        write_depth(&dir.join("depth_diffuse_twin.png"), &captures[1])?;
-        write_capture_exr(&dir.join("capture.exr"), &captures[0])?;
+        write_depth(&dir.join("depth.png"), &captures[0], &truths[0])?;
+        write_depth(
+            &dir.join("depth_diffuse_twin.png"),
+            &captures[1],
+            &truths[1],
+        )?;
+        write_capture_exr(&dir.join("capture.exr"), &captures[0], &truths[0])?;
         write_bop_image(
             &mut bop,
             k as u32,
@@ -215,8 +223,8 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
             poses,
             OBJ_ID,
         )?;
-        for (totals, capture) in edge_totals.iter_mut().zip(&captures) {
-            let bins = errors_by_edge_distance(capture, &part_labels, &EDGE_BIN_BOUNDS_PX);
+        for (totals, (capture, truth)) in edge_totals.iter_mut().zip(captures.iter().zip(&truths)) {
+            let bins = errors_by_edge_distance(capture, truth, &part_labels, &EDGE_BIN_BOUNDS_PX);
             if totals.is_empty() {
                 *totals = bins;
             } else {
@@ -230,12 +238,14 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
         for label in 1..=args.instances as u16 {
             let q: Vec<_> = captures
                 .iter()
-                .map(|c| depth_quality(c, &rig, radius, Some(label)))
+                .zip(&truths)
+                .map(|(c, t)| depth_quality(c, t, &rig, radius, Some(label)))
                 .collect();
             if q[0].eligible < 200 {
                 continue; // hardly visible from here
             }
-            let causes = missing_causes(&cameras[0].1, &captures[0], label, seed ^ 0x51);
+            let causes =
+                missing_causes(&cameras[0].1, &captures[0], &truths[0], label, seed ^ 0x51);
             for (t, qi) in totals.iter_mut().zip(&q) {
                 t.push(*qi);
             }
@@ -334,9 +344,9 @@ fn write_gray(path: &Path, img: &Image<u16>, max_dn: u16) -> anyhow::Result<()> 
 
 /// Depth as colour (blue near → red far over the capture's true depth range), missing magenta,
 /// nothing-there black.
-fn write_depth(path: &Path, capture: &StereoCapture) -> anyhow::Result<()> {
-    let truth = capture.gt_depth_m.data().iter().filter(|z| z.is_finite());
-    let (lo, hi) = truth.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &z| {
+fn write_depth(path: &Path, capture: &StereoCapture, truth: &CaptureTruth) -> anyhow::Result<()> {
+    let true_depth = truth.depth_m.data().iter().filter(|z| z.is_finite());
+    let (lo, hi) = true_depth.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &z| {
         (lo.min(z), hi.max(z))
     });
     let span = (hi - lo).max(1e-6);
@@ -346,7 +356,7 @@ fn write_depth(path: &Path, capture: &StereoCapture) -> anyhow::Result<()> {
         .depth_m
         .data()
         .iter()
-        .zip(capture.gt_depth_m.data())
+        .zip(truth.depth_m.data())
     {
         let px = if z.is_finite() {
             let x = ((z - lo) / span).clamp(0.0, 1.0);
@@ -406,16 +416,16 @@ fn run_exposure_stacks(
     let bar = glint_eval::progress::bar(views.len() as u64, "exposure stacks");
     for (k, t_w_c) in views.iter().enumerate() {
         let seed = capture_seed(args.seed, k);
-        let stack = camera.capture_exposure_stack(t_w_c, exposures_s, seed)?;
+        let (stack, truth) = camera.capture_exposure_stack(t_w_c, exposures_s, seed)?;
         let dir = bop.layout().exposure_stack_dir(k as u32);
         write_exposure_stack(&dir, &stack)?;
         // Ground truth beside the stack, for evaluating a calibration only.
         glint_render::exr_io::write_exr(
             &dir.join("gt_left_radiance.exr"),
-            &[("gt_left_radiance", &stack.gt_left_radiance)],
+            &[("gt_left_radiance", &truth.left_radiance)],
         )?;
         let seen = write_bop_annotations(&mut bop, k as u32, t_w_c, camera, poses, obj_id, None)?;
-        let on_part: Vec<usize> = (0..stack.gt_left_radiance.data().len())
+        let on_part: Vec<usize> = (0..truth.left_radiance.data().len())
             .filter(|&i| seen.iter().any(|v| v.mask_visib.data()[i] != 0))
             .collect();
         for (image, dt) in stack.left.iter().zip(&stack.exposures_s) {
@@ -452,19 +462,23 @@ fn run_exposure_stacks(
 }
 
 /// The view's float images as one EXR.
-fn write_capture_exr(path: &Path, capture: &StereoCapture) -> anyhow::Result<()> {
+fn write_capture_exr(
+    path: &Path,
+    capture: &StereoCapture,
+    truth: &CaptureTruth,
+) -> anyhow::Result<()> {
     let label = Image::new(
-        capture.gt_label.width(),
-        capture.gt_label.height(),
-        capture.gt_label.data().iter().map(|&l| l as f32).collect(),
+        truth.label.width(),
+        truth.label.height(),
+        truth.label.data().iter().map(|&l| l as f32).collect(),
     )?;
     glint_render::exr_io::write_exr(
         path,
         &[
             ("depth_m", &capture.depth.depth_m),
-            ("gt_depth_m", &capture.gt_depth_m),
+            ("gt_depth_m", &truth.depth_m),
             ("gt_label", &label),
-            ("gt_left_radiance", &capture.gt_left_radiance),
+            ("gt_left_radiance", &truth.left_radiance),
         ],
     )?;
     Ok(())

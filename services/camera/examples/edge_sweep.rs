@@ -10,7 +10,7 @@
 
 use glint_camera::bin::{BinSpec, bin_scene, drop_parts};
 use glint_camera::capture::{
-    CaptureConfig, DepthQuality, MockSliCamera, StereoCapture, depth_quality,
+    CaptureConfig, CaptureTruth, DepthQuality, MockSliCamera, StereoCapture, depth_quality,
 };
 use glint_camera::edge_errors::errors_by_edge_distance;
 use glint_camera::{materials, views};
@@ -101,7 +101,7 @@ fn main() -> anyhow::Result<()> {
     let config = CaptureConfig::for_rig(&rig)?;
     let views = views::spherical_cap(view_count, 0.5, 35.0, bin.centre(), rig.stereo.baseline_m);
     let scenes = [("shiny", &shiny), ("diffuse", &matte)];
-    let mut captures: Vec<Vec<StereoCapture>> = vec![Vec::new(), Vec::new()];
+    let mut captures: Vec<Vec<(StereoCapture, CaptureTruth)>> = vec![Vec::new(), Vec::new()];
     for (k, t_w_c) in views.iter().enumerate() {
         let seed = 1000 + k as u64;
         for (i, (_, scene)) in scenes.iter().enumerate() {
@@ -136,7 +136,7 @@ fn main() -> anyhow::Result<()> {
             };
             let mut qualities = Vec::new();
             let (mut near_edge, mut far_edge) = (0usize, 0usize);
-            for capture in &captures[i] {
+            for (capture, truth) in &captures[i] {
                 let (depth, match_status) = camera.match_pair(&capture.left, &capture.right)?;
                 let rematched = StereoCapture {
                     depth,
@@ -149,6 +149,7 @@ fn main() -> anyhow::Result<()> {
                     // eligible pixels are left out.
                     let q = depth_quality(
                         &rematched,
+                        truth,
                         &rig,
                         config.matcher.window_radius_px,
                         Some(label),
@@ -157,7 +158,7 @@ fn main() -> anyhow::Result<()> {
                         qualities.push(q);
                     }
                 }
-                let bins = errors_by_edge_distance(&rematched, &labels, &[2]);
+                let bins = errors_by_edge_distance(&rematched, truth, &labels, &[2]);
                 near_edge += bins[0].farther_5mm + bins[0].nearer_5mm;
                 far_edge += bins[1].farther_5mm + bins[1].nearer_5mm;
             }

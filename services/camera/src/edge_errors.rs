@@ -9,7 +9,7 @@
 
 use glint_geometry::image::Image;
 
-use crate::capture::StereoCapture;
+use crate::capture::{CaptureTruth, StereoCapture};
 
 /// A true-depth step between 4-neighbours above this, metres, makes both pixels edge pixels
 /// (5 mm: far above the depth change across one pixel of any surface of the scene but
@@ -101,14 +101,15 @@ pub fn distance_to_depth_edge(gt_depth_m: &Image<f32>) -> Image<u32> {
 }
 
 /// Bins the matched depth of the part pixels (labels `labels`) of `capture` by distance to
-/// the nearest depth edge: `bounds` are the bins' upper ends (inclusive, increasing), and a
-/// last bin takes everything farther.
+/// the nearest depth edge of its ground truth `truth`: `bounds` are the bins' upper ends
+/// (inclusive, increasing), and a last bin takes everything farther.
 pub fn errors_by_edge_distance(
     capture: &StereoCapture,
+    truth: &CaptureTruth,
     labels: &[u16],
     bounds: &[u32],
 ) -> Vec<EdgeBin> {
-    let distance = distance_to_depth_edge(&capture.gt_depth_m);
+    let distance = distance_to_depth_edge(&truth.depth_m);
     let mut bins: Vec<EdgeBin> = bounds
         .iter()
         .scan(0u32, |lo, &hi| {
@@ -126,10 +127,10 @@ pub fn errors_by_edge_distance(
         max_px: u32::MAX,
         ..EdgeBin::default()
     });
-    let truth = capture.gt_depth_m.data();
+    let true_depth = truth.depth_m.data();
     let matched = capture.depth.depth_m.data();
-    for (i, &label) in capture.gt_label.data().iter().enumerate() {
-        if !labels.contains(&label) || !truth[i].is_finite() || !matched[i].is_finite() {
+    for (i, &label) in truth.label.data().iter().enumerate() {
+        if !labels.contains(&label) || !true_depth[i].is_finite() || !matched[i].is_finite() {
             continue;
         }
         let dist = distance.data()[i];
@@ -137,7 +138,7 @@ pub fn errors_by_edge_distance(
             continue;
         };
         bin.valid += 1;
-        let e = matched[i] - truth[i];
+        let e = matched[i] - true_depth[i];
         if e > 5e-3 {
             bin.farther_5mm += 1;
         } else if e < -5e-3 {

@@ -12,7 +12,7 @@ use glint_geometry::image::Image;
 use glint_render::integrator::{LightTransport, RenderSettings, render};
 use glint_render::stereo::MatchStatus;
 
-use crate::capture::{MockSliCamera, StereoCapture};
+use crate::capture::{CaptureTruth, MockSliCamera, StereoCapture};
 
 /// Counts of missing pixels on one instance by cause (a pixel can have several causes).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -33,10 +33,12 @@ pub const INTER_REFLECTION_RATIO: f32 = 0.6;
 /// Window mean below which a pixel counts as dark: 4 % of full scale.
 pub const DARK_FRACTION: f32 = 0.04;
 
-/// Attributes the missing depth of instance `label` in `capture` (taken by `camera`).
+/// Attributes the missing depth of instance `label` in `capture` (taken by `camera`, with
+/// ground truth `truth`).
 pub fn missing_causes(
     camera: &MockSliCamera<'_>,
     capture: &StereoCapture,
+    truth: &CaptureTruth,
     label: u16,
     seed: u64,
 ) -> MissingCauses {
@@ -72,7 +74,7 @@ pub fn missing_causes(
     let mut causes = MissingCauses::default();
     for v in 0..h {
         for u in 0..w {
-            if capture.gt_label.get(u as u32, v as u32) != Some(label) {
+            if truth.label.get(u as u32, v as u32) != Some(label) {
                 continue;
             }
             causes.pixels += 1;
@@ -82,10 +84,7 @@ pub fn missing_causes(
             causes.missing += 1;
             let (clipped, mean) = window(&capture.left, u, v);
             let direct = single.get(u as u32, v as u32).unwrap_or(0.0);
-            let total = capture
-                .gt_left_radiance
-                .get(u as u32, v as u32)
-                .unwrap_or(0.0);
+            let total = truth.left_radiance.get(u as u32, v as u32).unwrap_or(0.0);
             let saturated = clipped;
             let low_snr = !clipped && mean < DARK_FRACTION;
             let inter = total > 0.0 && direct / total < INTER_REFLECTION_RATIO;

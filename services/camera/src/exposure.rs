@@ -11,7 +11,7 @@ use glint_render::projector::Pattern;
 use glint_render::sensor::Sensor;
 use nalgebra::Isometry3;
 
-use crate::capture::{CaptureError, MockSliCamera};
+use crate::capture::{CaptureError, CaptureTruth, MockSliCamera};
 
 /// One white-pattern exposure stack of the left camera.
 #[derive(Clone, Debug)]
@@ -24,9 +24,6 @@ pub struct ExposureStack {
     pub left: Vec<Image<u16>>,
     /// The sensor's bit depth (DNs run 0 ..= 2^bits − 1).
     pub bit_depth: u8,
-    /// Ground truth, for evaluation only: the left radiance under the white pattern,
-    /// W·sr⁻¹·m⁻².
-    pub gt_left_radiance: Image<f32>,
 }
 
 /// Checks an exposure list: at least 2 times, each finite and > 0, no two equal. Returns them
@@ -60,17 +57,18 @@ impl MockSliCamera<'_> {
     /// left radiance (the capture's light transport and samples), read out through the
     /// configured sensor with its exposure time replaced by each of `exposures_s` (seconds;
     /// validated by [`validated_exposures`], returned sorted), each read-out with its own noise
-    /// seed derived from `seed`.
+    /// seed derived from `seed`. The ground truth (the left radiance under the white pattern,
+    /// its depth and labels) comes beside the stack, for evaluation only.
     pub fn capture_exposure_stack(
         &self,
         t_w_c: &Isometry3<f64>,
         exposures_s: &[f64],
         seed: u64,
-    ) -> Result<ExposureStack, CaptureError> {
+    ) -> Result<(ExposureStack, CaptureTruth), CaptureError> {
         let exposures_s = validated_exposures(exposures_s)?;
         let [left, _] = self.rig.cameras(t_w_c);
         let projector = self.rig.projector(t_w_c, Pattern::White);
-        let radiance = render(
+        let render = render(
             self.scene,
             &left,
             &projector,
@@ -80,8 +78,8 @@ impl MockSliCamera<'_> {
                 roi: None,
                 seed,
             },
-        )
-        .radiance;
+        );
+        let radiance = &render.radiance;
         let images = exposures_s
             .iter()
             .enumerate()
@@ -92,16 +90,16 @@ impl MockSliCamera<'_> {
                 };
                 // Distinct, well-separated noise streams per exposure.
                 let noise_seed = seed ^ (k as u64 + 1).wrapping_mul(0xD1B5_4A32_D192_ED03);
-                sensor.read_out(&radiance, noise_seed)
+                sensor.read_out(radiance, noise_seed)
             })
             .collect();
-        Ok(ExposureStack {
+        let stack = ExposureStack {
             t_w_c: *t_w_c,
             exposures_s,
             left: images,
             bit_depth: self.config.sensor.bit_depth,
-            gt_left_radiance: radiance,
-        })
+        };
+        Ok((stack, CaptureTruth::from_render(render)))
     }
 }
 
@@ -170,7 +168,7 @@ mod tests {
             &Vector3::y(),
         );
         // Plane at 0.6 m sits at ~40 % of full well at 10 ms: 2 and 4 ms stay well below it.
-        let stack = camera
+        let (stack, truth) = camera
             .capture_exposure_stack(&t_w_c, &[4e-3, 2e-3, 4e-3 + 1e-9], 3)
             .unwrap();
         assert_eq!(stack.exposures_s, vec![2e-3, 4e-3, 4e-3 + 1e-9]);
@@ -189,13 +187,13 @@ mod tests {
             exposure_s: 4e-3,
             ..camera.config.sensor.clone()
         };
-        let expected = stack
-            .gt_left_radiance
+        let expected = truth
+            .left_radiance
             .data()
             .iter()
             .map(|&l| sensor.noiseless_dn(l) as f64)
             .sum::<f64>()
-            / stack.gt_left_radiance.data().len() as f64;
+            / truth.left_radiance.data().len() as f64;
         assert!((m4 - expected).abs() < 0.5, "{m4} vs {expected}");
         // Two almost equal exposures: different noise, so the images differ pixel by pixel.
         let differing = stack.left[1]

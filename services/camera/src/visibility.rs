@@ -4,8 +4,9 @@
 //! `visib_fract`).
 //!
 //! Both masks are primary-ray label passes through pixel centres, no shading: the same rays
-//! that give a capture's `gt_label`, so the visible mask equals `gt_label == label`. Ground
-//! truth, for evaluation and for selecting which instances to evaluate on.
+//! that give a [`crate::capture::CaptureTruth`]'s `label`, so the visible mask equals
+//! `truth.label == label`. Ground truth, for evaluation and for selecting which instances to
+//! evaluate on.
 
 use glint_geometry::image::{Image, PixelRect};
 use glint_render::integrator::{Camera, render_labels};

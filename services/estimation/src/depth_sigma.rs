@@ -8,6 +8,11 @@
 //! image (window centred on `u_L`) and once from the right (window centred on `u_R = u_L − d`),
 //! and the larger variance is kept (eq 5): depth is only as good as the weaker image.
 //!
+//! Multi-shot captures (K patterns matched together over space-time windows): the SSD of eq 1
+//! sums over the window and the K shots, so the Fisher information of eq 2–3 sums the squared
+//! x-gradients over both, `σ_d² = (Σ_k Σ_window J_k,i² / σ_e,k,i²)⁻¹`; K = 1 is the paper's
+//! single-shot form.
+//!
 //! Image noise: `e` is the difference of two noisy pixels, so `σ_e,i² = 2 σ_I²(I_i)` with
 //! `σ_I²(I)` the sensor's intensity-dependent noise variance. That comes from a
 //! [`NoiseModel`] the camera user measures (two shots of a static scene, the photon-transfer
@@ -29,6 +34,11 @@ pub enum DepthSigmaError {
         b_w: u32,
         b_h: u32,
     },
+    #[error(
+        "a capture needs at least one shot and as many right as left shots; got {left} left \
+         and {right} right"
+    )]
+    ShotCount { left: usize, right: usize },
     #[error(
         "noise model: only {pixels} unsaturated pixel pairs with signal; two shots of a lit, \
          static scene are needed"
@@ -171,37 +181,60 @@ fn check_same_size<T: Copy, U: Copy>(
     Ok(())
 }
 
-/// Per-pixel Fisher information of the disparity from one image, `Σ_window (∂I/∂u)² / σ_e²`
-/// (eq 2–3), as a summed-area table so any window costs O(1).
-fn disparity_information_table(image: &Image<f32>, noise: &NoiseModel) -> SummedAreaTable {
-    let (w, h) = (image.width() as usize, image.height() as usize);
-    let data = image.data();
+/// Per-pixel Fisher information of the disparity from one camera's K shots (equally sized),
+/// `Σ_k (∂I_k/∂u)² / σ_e²(I_k)` summed over a window (eq 2–3 over the sequence), as a
+/// summed-area table so any window costs O(1).
+fn disparity_information_table(shots: &[Image<f32>], noise: &NoiseModel) -> SummedAreaTable {
+    let (w, h) = shots
+        .first()
+        .map_or((0, 0), |i| (i.width() as usize, i.height() as usize));
     SummedAreaTable::from_fn(w, h, |u, v| {
         if u == 0 || u + 1 >= w {
             return 0.0;
         }
-        let row = &data[v * w..(v + 1) * w];
-        let gradient = 0.5 * (row[u + 1] as f64 - row[u - 1] as f64);
-        gradient * gradient / (2.0 * noise.variance(row[u]))
+        shots
+            .iter()
+            .map(|image| {
+                let row = &image.data()[v * w..(v + 1) * w];
+                let gradient = 0.5 * (row[u + 1] as f64 - row[u - 1] as f64);
+                gradient * gradient / (2.0 * noise.variance(row[u]))
+            })
+            .sum()
     })
 }
 
-/// σ_z (metres) of each pixel of `depth` (the left camera's, matched from `left` and `right`
-/// with a `(2r + 1)²` window, `r = window_radius_px`), by eq 1–5; NaN where depth is missing
-/// or a window leaves the image. A window without gradient gives +∞ (no information).
+/// σ_z (metres) of each pixel of `depth` (the left camera's, matched from the K shots `left[k]`,
+/// `right[k]` with a `(2r + 1)²` × K space-time window, `r = window_radius_px`), by eq 1–5 with
+/// the information summed over the shots; NaN where depth is missing or a window leaves the
+/// image. A window without gradient gives +∞ (no information). One shot is the single-shot
+/// camera.
 pub fn depth_sigma(
-    left: &Image<f32>,
-    right: &Image<f32>,
+    left: &[Image<f32>],
+    right: &[Image<f32>],
     depth: &DepthMap,
     rig: &StereoRig,
     noise: &NoiseModel,
     window_radius_px: u32,
 ) -> Result<Image<f32>, DepthSigmaError> {
-    check_same_size("left and right images", left, right)?;
-    check_same_size("left image and depth map", left, &depth.depth_m)?;
+    let Some(first) = left.first() else {
+        return Err(DepthSigmaError::ShotCount {
+            left: left.len(),
+            right: right.len(),
+        });
+    };
+    if right.len() != left.len() {
+        return Err(DepthSigmaError::ShotCount {
+            left: left.len(),
+            right: right.len(),
+        });
+    }
+    for image in left.iter().chain(right) {
+        check_same_size("left and right images", first, image)?;
+    }
+    check_same_size("left image and depth map", first, &depth.depth_m)?;
     let info_left = disparity_information_table(left, noise);
     let info_right = disparity_information_table(right, noise);
-    let (w, h) = (left.width(), left.height());
+    let (w, h) = (first.width(), first.height());
     let r = window_radius_px as i64;
     let window = |table: &SummedAreaTable, u: i64, v: i64| -> Option<f64> {
         (u - r >= 0 && v - r >= 0 && u + r < w as i64 && v + r < h as i64).then(|| {
@@ -248,6 +281,10 @@ mod tests {
 
     fn rig() -> StereoRig {
         StereoRig::ensenso_n35()
+    }
+
+    fn one(image: &Image<f32>) -> &[Image<f32>] {
+        std::slice::from_ref(image)
     }
 
     #[test]
@@ -342,7 +379,7 @@ mod tests {
         let variance = 1e-4;
         let noise = NoiseModel::constant(variance);
         let r = 5u32;
-        let sigma = depth_sigma(&left, &right, &depth, &rig, &noise, r).unwrap();
+        let sigma = depth_sigma(one(&left), one(&right), &depth, &rig, &noise, r).unwrap();
         // Central difference of a sinusoid: A sin(ω) cos(ω u); its square summed over a window
         // of n = 2r+1 columns × n rows ≈ n² A² sin²ω / 2 (the cos² averages to ½ over many
         // periods; with n = 11 and ω = 0.7 the window spans 1.2 periods, so compute it exactly
@@ -374,8 +411,8 @@ mod tests {
         assert!(sigma.get(2, v).unwrap().is_nan());
         // Doubling the noise variance scales σ_z by √2.
         let noisier = depth_sigma(
-            &left,
-            &right,
+            one(&left),
+            one(&right),
             &depth,
             &rig,
             &NoiseModel::constant(2.0 * variance),
@@ -401,7 +438,7 @@ mod tests {
         let noise = NoiseModel::constant(1e-4);
         let at = |z: f64| {
             let depth = DepthMap::new(Image::filled(w, h, z as f32).unwrap());
-            depth_sigma(&textured, &textured, &depth, &rig, &noise, 4).unwrap()
+            depth_sigma(one(&textured), one(&textured), &depth, &rig, &noise, 4).unwrap()
         };
         let (s1, s2) = (at(0.5), at(1.0));
         // F = f·b/d² ∝ z², and the same texture gives the same information: ratio 4, up to
@@ -411,13 +448,82 @@ mod tests {
         // A flat right image carries no information: σ_z is infinite (eq 5 keeps the worse).
         let flat = Image::filled(w, h, 0.5f32).unwrap();
         let depth = DepthMap::new(Image::filled(w, h, 0.5).unwrap());
-        let s = depth_sigma(&textured, &flat, &depth, &rig, &noise, 4).unwrap();
+        let s = depth_sigma(one(&textured), one(&flat), &depth, &rig, &noise, 4).unwrap();
         assert!(s.get(500, 15).unwrap().is_infinite());
         // Missing depth stays missing.
         let mut holes = Image::filled(w, h, 0.5f32).unwrap();
         holes.set(500, 15, f32::NAN);
-        let s = depth_sigma(&textured, &textured, &DepthMap::new(holes), &rig, &noise, 4).unwrap();
+        let s = depth_sigma(
+            one(&textured),
+            one(&textured),
+            &DepthMap::new(holes),
+            &rig,
+            &noise,
+            4,
+        )
+        .unwrap();
         assert!(s.get(500, 15).unwrap().is_nan());
+    }
+
+    /// The sinusoid pair of the closed-form test at angular frequency `omega`.
+    fn sinusoid_pair(omega: f64, amp: f64, d: f64) -> (Image<f32>, Image<f32>) {
+        let (w, h) = (400u32, 40u32);
+        let image = |shift: f64| {
+            let data = (0..w * h)
+                .map(|i| (0.5 + amp * (omega * ((i % w) as f64 + shift)).sin()) as f32)
+                .collect();
+            Image::new(w, h, data).unwrap()
+        };
+        (image(0.0), image(d))
+    }
+
+    /// eq 2–3 over a sequence: the information of the shots adds. K copies of one pair divide
+    /// σ_z by √K; two different pairs give 1/σ² = 1/σ_A² + 1/σ_B² (left and right windows see
+    /// the same phase here, so eq 5's minimum does not switch sides). Only f32 rounding of the
+    /// σ images separates the two sides (relative 1e-7; 1e-5 asserted).
+    #[test]
+    fn information_adds_over_shots() {
+        let rig = rig();
+        let d = 183.0;
+        let z = rig.depth_from_disparity(d);
+        let (a_left, a_right) = sinusoid_pair(0.7, 0.2, d);
+        let (b_left, b_right) = sinusoid_pair(1.1, 0.1, d);
+        let depth = DepthMap::new(Image::filled(400, 40, z as f32).unwrap());
+        let noise = NoiseModel::constant(1e-4);
+        let sigma = |left: &[Image<f32>], right: &[Image<f32>]| {
+            depth_sigma(left, right, &depth, &rig, &noise, 2)
+                .unwrap()
+                .get(300, 20)
+                .unwrap() as f64
+        };
+        let single = sigma(one(&a_left), one(&a_right));
+        let four = sigma(&vec![a_left.clone(); 4], &vec![a_right.clone(); 4]);
+        assert!(
+            (four * 2.0 / single - 1.0).abs() < 1e-5,
+            "{four} vs {single}"
+        );
+        let b = sigma(one(&b_left), one(&b_right));
+        let both = sigma(
+            &[a_left.clone(), b_left.clone()],
+            &[a_right.clone(), b_right.clone()],
+        );
+        let expected = (single.powi(-2) + b.powi(-2)).powf(-0.5);
+        assert!((both / expected - 1.0).abs() < 1e-5, "{both} vs {expected}");
+        assert!(matches!(
+            depth_sigma(
+                &[a_left.clone(), b_left],
+                one(&a_right),
+                &depth,
+                &rig,
+                &noise,
+                2
+            ),
+            Err(DepthSigmaError::ShotCount { left: 2, right: 1 })
+        ));
+        assert!(matches!(
+            depth_sigma(&[], &[], &depth, &rig, &noise, 2),
+            Err(DepthSigmaError::ShotCount { left: 0, right: 0 })
+        ));
     }
 
     #[test]
@@ -427,7 +533,7 @@ mod tests {
         let depth = DepthMap::new(Image::filled(10, 10, 0.5f32).unwrap());
         let noise = NoiseModel::constant(1e-4);
         assert!(matches!(
-            depth_sigma(&a, &b, &depth, &rig(), &noise, 2),
+            depth_sigma(one(&a), one(&b), &depth, &rig(), &noise, 2),
             Err(DepthSigmaError::SizeMismatch {
                 what: "left and right images",
                 ..

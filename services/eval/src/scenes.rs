@@ -138,7 +138,7 @@ fn generate(
     let bar = crate::progress::bar(view_poses.len() as u64, &format!("{} {seed}", object.name));
     for (k, t_w_c) in view_poses.iter().enumerate() {
         let view_seed = capture_seed(seed, k);
-        let capture = camera.capture(t_w_c, view_seed)?;
+        let (capture, truth) = camera.capture(t_w_c, view_seed)?;
         write_bop_image(&mut bop, k as u32, &capture, &camera, poses, OBJ_ID)?;
         if k == 0 {
             // Two more read-outs of this view's left pattern radiance: what a user does to
@@ -147,7 +147,7 @@ fn generate(
                 let dn = camera
                     .config
                     .sensor
-                    .read_out(&capture.gt_left_radiance, view_seed ^ s);
+                    .read_out(&truth.left_radiance, view_seed ^ s);
                 let path = noise_shot_path(&glint_dir, shot);
                 write_png_u8(&path, &to_8bit(&dn, camera.config.sensor.max_dn()))
                     .with_context(|| format!("writing {}", path.display()))?;
@@ -247,7 +247,14 @@ pub fn load_scene(
         let depth = reader.depth(im_id)?;
         let (left, _) = pattern_as_normalised(reader.pattern(im_id, StereoSide::Left)?);
         let (right, _) = pattern_as_normalised(reader.pattern(im_id, StereoSide::Right)?);
-        let sigma_image = depth_sigma(&left, &right, &depth, &rig.stereo, &noise, window_radius)?;
+        let sigma_image = depth_sigma(
+            std::slice::from_ref(&left),
+            std::slice::from_ref(&right),
+            &depth,
+            &rig.stereo,
+            &noise,
+            window_radius,
+        )?;
         let gts = reader.gt(im_id).unwrap_or(&[]).to_vec();
         let infos = reader.gt_info(im_id).map(|i| i.to_vec());
         let mut objects = Vec::new();

@@ -121,6 +121,33 @@ pub fn render(
     projector: &Projector,
     settings: &RenderSettings,
 ) -> RenderOutput {
+    let mut sinks = vec![(); camera.intrinsics.height_px as usize];
+    render_with_sinks(scene, camera, projector, settings, &mut sinks)
+}
+
+/// Receives every next-event contribution of a render, one sink per image row: what
+/// [`crate::pattern_record`] records to evaluate other projector patterns without tracing again.
+pub(crate) trait DirectSink: Send {
+    /// Column `u` of the sink's row received `radiance` (the path throughput × the projector's
+    /// direct light, W·sr⁻¹·m⁻², not yet divided by the samples per pixel) from the surface
+    /// point `point_w` (world). Called in the order the samples are traced.
+    fn direct(&mut self, u: u32, point_w: Vec3A, radiance: f32);
+}
+
+impl DirectSink for () {
+    #[inline]
+    fn direct(&mut self, _: u32, _: Vec3A, _: f32) {}
+}
+
+/// [`render`], handing every next-event contribution of row v to `sinks[v]` (`sinks` has one
+/// entry per image row; rows without one are not rendered).
+pub(crate) fn render_with_sinks<S: DirectSink>(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    settings: &RenderSettings,
+    sinks: &mut [S],
+) -> RenderOutput {
     let k = &camera.intrinsics;
     let (w, h) = (k.width_px, k.height_px);
     let roi = settings
@@ -135,11 +162,12 @@ pub fn render(
     let rows = radiance
         .par_chunks_mut(w as usize)
         .zip(depth.par_chunks_mut(w as usize))
-        .zip(label.par_chunks_mut(w as usize));
+        .zip(label.par_chunks_mut(w as usize))
+        .zip(sinks.par_iter_mut());
     let rays_traced: u64 = rows
         .enumerate()
         .filter(|(v, _)| (roi.v_min..roi.v_min + roi.height).contains(&(*v as u32)))
-        .map(|(v, ((radiance_row, depth_row), label_row))| {
+        .map(|(v, (((radiance_row, depth_row), label_row), sink))| {
             let mut rng = rand_pcg::Pcg32::seed_from_u64(
                 settings.seed ^ (v as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             );
@@ -162,6 +190,7 @@ pub fn render(
                         &mut rng,
                         &|i| *scene.material_of(i),
                         None,
+                        &mut |point, radiance| sink.direct(u, point, radiance),
                     );
                     rays += path.rays;
                     sum += path.radiance;
@@ -397,7 +426,15 @@ pub fn path_pixel_frozen_sampling<T: BsdfScalar>(
         let (d_c, direction) =
             camera_ray(&camera.intrinsics, &rotation, u as f32 + ju, v as f32 + jv);
         let path = trace(
-            scene, projector, origin, direction, transport, &mut rng, &material, sampling,
+            scene,
+            projector,
+            origin,
+            direction,
+            transport,
+            &mut rng,
+            &material,
+            sampling,
+            &mut |_, _| {},
         );
         if s == 0 {
             centre = path.first_hit.map(|(t, instance)| (t * d_c.z, instance));
@@ -422,7 +459,9 @@ pub fn path_pixel_frozen_sampling<T: BsdfScalar>(
 /// tracers). With `f32` the throughput factor is the sample's own weight, as always.
 /// `sampling`, when given, replaces the real part of the material in every random decision
 /// (see [`path_pixel_frozen_sampling`]); Russian roulette always uses the sampling side's
-/// throughput, so it is detached like the density.
+/// throughput, so it is detached like the density. `on_direct(point, contribution)` sees every
+/// vertex's next-event term (throughput × direct light) as it is added; no random decision
+/// depends on the projector's pattern, so the same seed traces the same paths under any pattern.
 #[allow(clippy::too_many_arguments)]
 fn trace<T: BsdfScalar>(
     scene: &Scene,
@@ -433,6 +472,7 @@ fn trace<T: BsdfScalar>(
     rng: &mut impl Rng,
     material: &impl Fn(u32) -> PrincipledParams<T>,
     sampling: Option<&dyn Fn(u32) -> PrincipledParams<f32>>,
+    on_direct: &mut impl FnMut(Vec3A, T),
 ) -> PathResult<T> {
     let (max_bounces, roulette_after, min_indirect_roughness) = match transport {
         LightTransport::SinglePath => (1, u32::MAX, 0.0),
@@ -473,7 +513,9 @@ fn trace<T: BsdfScalar>(
         let (direct, shadow_rays) =
             direct_light(scene, projector, &hit, &frame, towards_previous, &material);
         result.rays += shadow_rays;
-        result.radiance += throughput * direct;
+        let contribution = throughput * direct;
+        on_direct(hit.point, contribution);
+        result.radiance += contribution;
         if bounce + 1 == max_bounces {
             break;
         }

@@ -6,6 +6,7 @@
 pub mod bsdf;
 pub mod exr_io;
 pub mod integrator;
+pub mod pattern_record;
 pub mod projector;
 pub mod rig;
 pub mod scene;

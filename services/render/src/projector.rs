@@ -37,7 +37,7 @@ impl Pattern {
 
     /// Transmittance at continuous projector pixel coordinates (0 outside the image).
     #[inline]
-    fn transmittance(&self, uv: Point2<f64>, intrinsics: &PinholeIntrinsics) -> f32 {
+    pub fn transmittance(&self, uv: Point2<f64>, intrinsics: &PinholeIntrinsics) -> f32 {
         let (w, h) = (intrinsics.width_px as f64, intrinsics.height_px as f64);
         if !(uv.x >= 0.0 && uv.x < w && uv.y >= 0.0 && uv.y < h) {
             return 0.0;
@@ -45,21 +45,61 @@ impl Pattern {
         match self {
             Pattern::White => 1.0,
             Pattern::Texture(img) => {
-                // The texture may have its own resolution: map the frustum onto it.
-                let x = uv.x / w * img.width() as f64 - 0.5;
-                let y = uv.y / h * img.height() as f64 - 0.5;
-                let (x0, y0) = (x.floor(), y.floor());
-                let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-                let at = |i: f64, j: f64| {
-                    let i = i.clamp(0.0, img.width() as f64 - 1.0) as u32;
-                    let j = j.clamp(0.0, img.height() as f64 - 1.0) as u32;
-                    img.get(i, j).unwrap_or(0.0)
-                };
-                let top = at(x0, y0) * (1.0 - fx) + at(x0 + 1.0, y0) * fx;
-                let bottom = at(x0, y0 + 1.0) * (1.0 - fx) + at(x0 + 1.0, y0 + 1.0) * fx;
-                top * (1.0 - fy) + bottom * fy
+                let taps = BilinearTaps::new(uv, intrinsics, img.width(), img.height());
+                taps.sample(img.data())
             }
         }
+    }
+}
+
+/// Where a bilinear lookup of a `width × height` texture mapped onto the projector frustum
+/// reads, and with which weights: computed once, applied to any texture of that size (the
+/// many patterns of a multi-shot capture).
+#[derive(Clone, Copy, Debug)]
+pub struct BilinearTaps {
+    /// Row-major indices of the texels (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1),
+    /// clamped to the texture.
+    pub index: [u32; 4],
+    /// Fractional position between them.
+    pub fx: f32,
+    pub fy: f32,
+}
+
+impl BilinearTaps {
+    /// The taps at continuous projector pixel coordinates `uv` (inside the frustum).
+    #[inline]
+    pub fn new(uv: Point2<f64>, intrinsics: &PinholeIntrinsics, width: u32, height: u32) -> Self {
+        // The texture may have its own resolution: map the frustum onto it.
+        let x = uv.x / intrinsics.width_px as f64 * width as f64 - 0.5;
+        let y = uv.y / intrinsics.height_px as f64 * height as f64 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        let at = |i: f64, j: f64| {
+            let i = i.clamp(0.0, width as f64 - 1.0) as u32;
+            let j = j.clamp(0.0, height as f64 - 1.0) as u32;
+            j * width + i
+        };
+        Self {
+            index: [
+                at(x0, y0),
+                at(x0 + 1.0, y0),
+                at(x0, y0 + 1.0),
+                at(x0 + 1.0, y0 + 1.0),
+            ],
+            fx,
+            fy,
+        }
+    }
+
+    /// The interpolated value of `texels` (the texture's row-major data; 0 for an index
+    /// beyond it).
+    #[inline]
+    pub fn sample(&self, texels: &[f32]) -> f32 {
+        let t = |k: usize| texels.get(self.index[k] as usize).copied().unwrap_or(0.0);
+        let (fx, fy) = (self.fx, self.fy);
+        let top = t(0) * (1.0 - fx) + t(1) * fx;
+        let bottom = t(2) * (1.0 - fx) + t(3) * fx;
+        top * (1.0 - fy) + bottom * fy
     }
 }
 
@@ -93,17 +133,25 @@ impl Projector {
         let centre = self.t_w_p.translation.vector.cast::<f32>();
         let to_light = Vec3A::new(centre.x, centre.y, centre.z) - p_w;
         let distance_m = to_light.length();
-        let p_p = self.t_w_p.inverse_transform_point(&Point3::new(
-            p_w.x as f64,
-            p_w.y as f64,
-            p_w.z as f64,
-        ));
-        let uv = self.intrinsics.project(&p_p)?;
+        let uv = self.pattern_coordinates(p_w)?;
         let transmittance = self.pattern.transmittance(uv, &self.intrinsics);
         (transmittance > 0.0 && distance_m > 0.0).then(|| Illumination {
             direction: to_light / distance_m,
             distance_m,
             intensity_w_per_sr: self.intensity_w_per_sr * transmittance,
         })
+    }
+
+    /// Where world point `p_w` falls in the projector image: continuous pixel coordinates
+    /// (pixel centres at +0.5), `None` behind the projector. Points outside the image get
+    /// coordinates outside `0..width × 0..height` (transmittance 0).
+    #[inline]
+    pub fn pattern_coordinates(&self, p_w: Vec3A) -> Option<Point2<f64>> {
+        let p_p = self.t_w_p.inverse_transform_point(&Point3::new(
+            p_w.x as f64,
+            p_w.y as f64,
+            p_w.z as f64,
+        ));
+        self.intrinsics.project(&p_p)
     }
 }

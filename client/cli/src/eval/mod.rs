@@ -1,5 +1,6 @@
 //! `glint eval …`: the paper's experiments on mock-camera data (or any BOP scene).
 
+mod camera_exp;
 mod refine_exp;
 mod uncertainty_exp;
 
@@ -11,11 +12,16 @@ pub enum EvalCommand {
     /// Fig. 3: predicted depth σ_z (eq 1–5) against the measured spread of depth over
     /// repeated captures of a static scene.
     Uncertainty(uncertainty_exp::UncertaintyArgs),
+    /// The mock camera against known geometry: depth-point distance to the true surface per
+    /// shot count K and window size, on each part's diffuse twin and shiny material, by
+    /// distance to depth edges, and a plane at 0.6 m.
+    Camera(camera_exp::CameraArgs),
 }
 
 pub fn run(command: EvalCommand) -> anyhow::Result<()> {
     match command {
         EvalCommand::Refine(args) => refine_exp::run(&args),
         EvalCommand::Uncertainty(args) => uncertainty_exp::run(&args),
+        EvalCommand::Camera(args) => camera_exp::run(&args),
     }
 }

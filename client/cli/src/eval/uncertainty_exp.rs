@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use glint_camera::capture::StereoCapture;
+use glint_camera::capture::{CaptureTruth, StereoCapture};
 use glint_camera::materials;
 use glint_camera::setup::{BinSetup, BinSetupSpec};
 use glint_estimation::depth_sigma::{NoiseModel, depth_sigma};
@@ -84,30 +84,38 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
     )?;
     let (rig, camera) = (setup.rig, setup.camera());
     let t_w_c = setup.views(1)[0];
-    let renders = camera.render_pair(&t_w_c, camera.pattern(), args.seed);
+    let renders = camera.render_shots(&t_w_c, args.seed);
     let sensor = &camera.config.sensor;
     let max_dn = sensor.max_dn();
 
     // The noise model from two extra shots, as a user would measure it.
-    let shot = |s: u64| normalised_intensity(&sensor.read_out(&renders[0].radiance, s), max_dn);
+    let shot = |s: u64| normalised_intensity(&sensor.read_out(&renders.left[0], s), max_dn);
     let noise = NoiseModel::fit_from_pair(&shot(0xA1), &shot(0xB2), max_dn)?;
 
     let bar = glint_eval::progress::bar(args.repeats as u64, "captures");
     let mut captures: Vec<StereoCapture> = Vec::new();
+    let mut truths: Vec<CaptureTruth> = Vec::new();
     for r in 0..args.repeats {
-        captures.push(camera.capture_rendered(
-            &t_w_c,
-            renders.clone(),
-            args.seed ^ (1000 + r as u64),
-        )?);
+        let (capture, truth) =
+            camera.capture_rendered(&t_w_c, &renders, args.seed ^ (1000 + r as u64))?;
+        captures.push(capture);
+        truths.push(truth);
         bar.inc(1);
     }
     bar.finish_and_clear();
     // σ_z predicted from the first capture alone, as the refiner would.
     let first = &captures[0];
     let predicted = depth_sigma(
-        &normalised_intensity(&first.left, max_dn),
-        &normalised_intensity(&first.right, max_dn),
+        &first
+            .shot_images(0)
+            .into_iter()
+            .map(|dn| normalised_intensity(dn, max_dn))
+            .collect::<Vec<_>>(),
+        &first
+            .shot_images(1)
+            .into_iter()
+            .map(|dn| normalised_intensity(dn, max_dn))
+            .collect::<Vec<_>>(),
         &first.depth,
         &rig.stereo,
         &noise,
@@ -118,7 +126,7 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
     let mut depths = Vec::with_capacity(captures.len());
     for v in 0..h {
         for u in 0..w {
-            let label = first.gt_label.get(u, v).unwrap_or(0);
+            let label = truths[0].label.get(u, v).unwrap_or(0);
             if label == 0 || label as u32 > args.instances {
                 continue; // parts only
             }

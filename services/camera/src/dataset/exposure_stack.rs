@@ -211,7 +211,6 @@ mod tests {
             exposures_s: vec![2.5e-4, 1e-3, 8e-3],
             left: (0..3).map(image).collect(),
             bit_depth,
-            gt_left_radiance: Image::filled(4, 3, 0.0).unwrap(),
         }
     }
 

@@ -1,7 +1,7 @@
 //! The ZNCC kernel: one band of rows, streaming, O(W·D) work per row whatever the window size.
 //!
 //! For a left pixel u and disparity d (right pixel c = u − d), with sums over the `(2r+1)²`
-//! window:
+//! window and all K shots of the sequence (space-time ZNCC; K = 1 is the single-shot case):
 //!
 //! ```text
 //! ZNCC(u, d) = (Σ l·r − Σl · r̄) / (‖l − l̄‖ · ‖r − r̄‖)
@@ -10,7 +10,7 @@
 //! `Σl`, `r̄` and the norms come from summed-area tables ([`super::window_stats`]). The cross
 //! term Σ l·r is kept as running sums: per window column x and candidate k = d − d_min,
 //! `column[x][k] = Σ_rows l(x)·r(x − d)` is updated as the window slides down one row (add the
-//! entering row's products, subtract the leaving row's), and the window sum is a running sum of
+//! entering row's products of every shot, subtract the leaving row's), and the window sum is a running sum of
 //! 2r+1 columns as u slides right. Each row costs ~2 multiply-adds per (x, k) for the columns
 //! and one add, one subtract and the ZNCC per (u, k).
 //!
@@ -94,31 +94,42 @@ pub(super) fn match_band(
             (count, if count > 0 { plan.mirror_base() - x } else { 0 })
         })
         .collect();
-    let left_row = |v: usize| &patches.left[(v - plan.patch_rows.start) * nl..][..nl];
-    let right_row = |v: usize| &patches.right_mirrored[(v - plan.patch_rows.start) * nr..][..nr];
+    // Row v of shot k.
+    let rows_per_shot = plan.patch_rows.len();
+    let left_row = |v: usize, k: usize| {
+        &patches.left[(k * rows_per_shot + v - plan.patch_rows.start) * nl..][..nl]
+    };
+    let right_row = |v: usize, k: usize| {
+        &patches.right_mirrored[(k * rows_per_shot + v - plan.patch_rows.start) * nr..][..nr]
+    };
+    let shots = patches.shots;
 
     let scored = rows.start.saturating_sub(s).max(plan.score_rows.start)
         ..(rows.end + s).min(plan.score_rows.end);
     for v in scored.start - r..=scored.start + r {
-        add_row_products(
-            &mut column_sums,
-            d_count,
-            &columns,
-            left_row(v),
-            right_row(v),
-        );
+        for k in 0..shots {
+            add_row_products(
+                &mut column_sums,
+                d_count,
+                &columns,
+                left_row(v, k),
+                right_row(v, k),
+            );
+        }
     }
     let mut next = scored.start;
     for v in rows.clone() {
         while next < (v + s + 1).min(scored.end) {
             if next > scored.start {
-                slide_row_products(
-                    &mut column_sums,
-                    d_count,
-                    &columns,
-                    (left_row(next + r), right_row(next + r)),
-                    (left_row(next - r - 1), right_row(next - r - 1)),
-                );
+                for k in 0..shots {
+                    slide_row_products(
+                        &mut column_sums,
+                        d_count,
+                        &columns,
+                        (left_row(next + r, k), right_row(next + r, k)),
+                        (left_row(next - r - 1, k), right_row(next - r - 1, k)),
+                    );
+                }
             }
             score_row(
                 plan,

@@ -53,6 +53,11 @@ pub enum StereoError {
     BadDisparityRange { min_px: u32, max_px: u32 },
     #[error("maximum disparity {max_px} px leaves no column to match in an image {width} px wide")]
     DisparityRangeTooWide { max_px: u32, width: u32 },
+    #[error(
+        "a sequence needs at least one shot and as many right as left shots; got {left} left \
+         and {right} right"
+    )]
+    ShotCount { left: usize, right: usize },
     #[error("{field} = {value} is out of its valid range ({valid})")]
     BadParameter {
         field: &'static str,

@@ -32,13 +32,59 @@ pub fn match_stereo(
     config: &StereoMatcherConfig,
     roi: Option<PixelRect>,
 ) -> Result<StereoResult, StereoError> {
+    match_stereo_sequence(&[left], &[right], config, roi)
+}
+
+/// Spatio-temporal matching of a sequence of K rectified pairs taken under K different
+/// projector patterns from one static viewpoint (`left[k]`, `right[k]` under pattern k): as
+/// [`match_stereo`], with every ZNCC taken over the `(2r+1)²` window × all K shots,
+///
+/// ```text
+/// ZNCC(u, d) = Σ_k Σ_w (l − l̄)(r − r̄) / (‖l − l̄‖ · ‖r − r̄‖),  means and norms over window × shots,
+/// ```
+///
+/// so the texture, uniqueness and left-right checks, window choice and subpixel fit act on
+/// space-time windows. A pixel's K values carry K independent pattern samples, so a small
+/// window is as unique as a K-times larger single-shot one without mixing depths across it.
+/// K = 1 is [`match_stereo`] exactly (same operations in the same order).
+///
+/// Errors as [`match_stereo`], and [`StereoError::ShotCount`] when a side has no shot or the
+/// sides differ in shot count; every image must have the first left image's size.
+pub fn match_stereo_sequence(
+    left: &[&Image<f32>],
+    right: &[&Image<f32>],
+    config: &StereoMatcherConfig,
+    roi: Option<PixelRect>,
+) -> Result<StereoResult, StereoError> {
     config.validate()?;
+    let Some(first) = left.first() else {
+        return Err(StereoError::ShotCount {
+            left: left.len(),
+            right: right.len(),
+        });
+    };
+    if right.len() != left.len() {
+        return Err(StereoError::ShotCount {
+            left: left.len(),
+            right: right.len(),
+        });
+    }
+    for other in left.iter().chain(right) {
+        if (other.width(), other.height()) != (first.width(), first.height()) {
+            return Err(StereoError::SizeMismatch {
+                left_width: first.width(),
+                left_height: first.height(),
+                right_width: other.width(),
+                right_height: other.height(),
+            });
+        }
+    }
     let mut result = match_windows(left, right, config, roi)?;
     if let Some(edge) = config.edge_windows {
         rematch_near_edges(left, right, config, &edge, &mut result)?;
     }
     if let Some(filter) = &config.speckle {
-        let w = left.width() as usize;
+        let w = first.width() as usize;
         remove_speckles(
             result.disparity_px.data_mut(),
             result.status.data_mut(),
@@ -116,13 +162,13 @@ pub(super) fn near_depth_edges(result: &StereoResult, step_px: f32, radius: usiz
 /// Replaces the result near depth edges with a smaller-window match (see
 /// [`StereoMatcherConfig::edge_windows`]), matching only the box around those pixels.
 fn rematch_near_edges(
-    left: &Image<f32>,
-    right: &Image<f32>,
+    left: &[&Image<f32>],
+    right: &[&Image<f32>],
     config: &StereoMatcherConfig,
     edge: &EdgeWindows,
     result: &mut StereoResult,
 ) -> Result<(), StereoError> {
-    let w = left.width() as usize;
+    let w = result.disparity_px.width() as usize;
     let near = near_depth_edges(result, edge.step_px, config.window_radius_px as usize);
     let (mut u0, mut v0, mut u1, mut v1) = (usize::MAX, usize::MAX, 0, 0);
     for (i, _) in near.iter().enumerate().filter(|(_, n)| **n) {
@@ -153,20 +199,27 @@ fn rematch_near_edges(
     Ok(())
 }
 
-/// One window size's matching over `roi`, without the speckle pass.
+/// One window size's matching over `roi`, without the speckle pass; `left` and `right` are
+/// equally long (≥ 1) sequences of equally sized images.
 fn match_windows(
-    left: &Image<f32>,
-    right: &Image<f32>,
+    left: &[&Image<f32>],
+    right: &[&Image<f32>],
     config: &StereoMatcherConfig,
     roi: Option<PixelRect>,
 ) -> Result<StereoResult, StereoError> {
-    let (width, height) = (left.width(), left.height());
-    if (right.width(), right.height()) != (width, height) {
+    let (Some(first_left), Some(first_right)) = (left.first(), right.first()) else {
+        return Err(StereoError::ShotCount {
+            left: left.len(),
+            right: right.len(),
+        });
+    };
+    let (width, height) = (first_left.width(), first_left.height());
+    if (first_right.width(), first_right.height()) != (width, height) {
         return Err(StereoError::SizeMismatch {
             left_width: width,
             left_height: height,
-            right_width: right.width(),
-            right_height: right.height(),
+            right_width: first_right.width(),
+            right_height: first_right.height(),
         });
     }
     let roi = roi.unwrap_or(PixelRect::full(width, height));

@@ -9,7 +9,9 @@
 //! - Invalid disparity and depth are NaN, with a [`MatchStatus`] saying why.
 //!
 //! # Algorithm ([`match_stereo`])
-//! Local window matching with zero-mean normalised cross-correlation (ZNCC), winner-takes-all:
+//! Local window matching with zero-mean normalised cross-correlation (ZNCC), winner-takes-all.
+//! [`match_stereo_sequence`] matches K shots under K patterns at once (space-time windows: the
+//! sums below run over the window and the shots); [`match_stereo`] is its K = 1 case.
 //! 1. **Cost.** ZNCC over a `(2r+1)²` window for every integer disparity of the
 //!    [`DisparityRange`]. It is invariant to gain and offset between the two cameras, which
 //!    matters for shiny parts whose radiance differs between viewpoints. Window sums use
@@ -68,5 +70,5 @@ mod tests;
 pub use config::{DisparityRange, EdgeWindows, SpeckleFilter, StereoMatcherConfig, SubpixelFit};
 pub use error::{Side, StereoError};
 pub use glint_geometry::image::PixelRect;
-pub use matcher::match_stereo;
+pub use matcher::{match_stereo, match_stereo_sequence};
 pub use result::{MatchStatus, StereoResult, disparity_to_depth};

@@ -111,13 +111,18 @@ impl MatchPlan {
     }
 }
 
-/// The images as the kernel reads them: the planned regions copied out, each centred on its
-/// mean (ZNCC is invariant to that, and it keeps the running sums small and exact-ish in f32),
-/// the right one mirrored left-right per row, with their window statistics.
+/// The image sequences as the kernel reads them: the planned regions of every shot copied out,
+/// each side centred on its mean over all shots (space-time ZNCC is invariant to one offset per
+/// side, and it keeps the running sums small and exact-ish in f32), the right one mirrored
+/// left-right per row, with their space-time window statistics. Shot k's plane follows shot
+/// k − 1's.
 pub(super) struct Patches {
-    /// `patch_rows × left_cols`.
+    /// Shots K ≥ 1.
+    pub shots: usize,
+    /// `K × patch_rows × left_cols`.
     pub left: Vec<f32>,
-    /// `patch_rows × right_cols`, row-mirrored: right column c at index `right_cols.end − 1 − c`.
+    /// `K × patch_rows × right_cols`, row-mirrored: right column c at index
+    /// `right_cols.end − 1 − c`.
     pub right_mirrored: Vec<f32>,
     /// Window sum Σl and 1/‖l − l̄‖ (0: no texture), `patch_rows × left_cols`.
     pub left_stats: WindowStats,
@@ -127,14 +132,17 @@ pub(super) struct Patches {
 }
 
 impl Patches {
+    /// `left` and `right` are the K shots of each side (same length ≥ 1, equal sizes: the
+    /// caller checks).
     pub fn new(
         plan: &MatchPlan,
-        left: &Image<f32>,
-        right: &Image<f32>,
+        left: &[&Image<f32>],
+        right: &[&Image<f32>],
         min_window_std: f32,
     ) -> Result<Self, StereoError> {
         let r = plan.radius;
-        let n = ((2 * r + 1) * (2 * r + 1)) as f32;
+        let shots = left.len();
+        let n = ((2 * r + 1) * (2 * r + 1) * shots) as f32;
         let (nl, nr) = (plan.left_cols.len(), plan.right_cols.len());
         let left = copy_centred(left, Side::Left, &plan.left_cols, &plan.patch_rows)?;
         let right = copy_centred(right, Side::Right, &plan.right_cols, &plan.patch_rows)?;
@@ -152,6 +160,7 @@ impl Patches {
             buffer.chunks_exact_mut(nr).for_each(|row| row.reverse());
         }
         Ok(Self {
+            shots,
             left,
             right_mirrored,
             left_stats,
@@ -161,27 +170,30 @@ impl Patches {
     }
 }
 
-/// Copies `cols × rows` of `image`, checking every value is finite, minus its mean.
+/// Copies `cols × rows` of every shot of `images` (one plane after another), checking every
+/// value is finite, minus their common mean.
 fn copy_centred(
-    image: &Image<f32>,
+    images: &[&Image<f32>],
     side: Side,
     cols: &Range<usize>,
     rows: &Range<usize>,
 ) -> Result<Vec<f32>, StereoError> {
-    let mut out = Vec::with_capacity(cols.len() * rows.len());
+    let mut out = Vec::with_capacity(cols.len() * rows.len() * images.len());
     let mut total = 0.0f64;
-    for v in rows.clone() {
-        let row = &image.row(v as u32)[cols.clone()];
-        if let Some(i) = row.iter().position(|x| !x.is_finite()) {
-            return Err(StereoError::NonFinite {
-                side,
-                u: (cols.start + i) as u32,
-                v: v as u32,
-                value: row[i],
-            });
+    for image in images {
+        for v in rows.clone() {
+            let row = &image.row(v as u32)[cols.clone()];
+            if let Some(i) = row.iter().position(|x| !x.is_finite()) {
+                return Err(StereoError::NonFinite {
+                    side,
+                    u: (cols.start + i) as u32,
+                    v: v as u32,
+                    value: row[i],
+                });
+            }
+            total += row.iter().map(|&x| x as f64).sum::<f64>();
+            out.extend_from_slice(row);
         }
-        total += row.iter().map(|&x| x as f64).sum::<f64>();
-        out.extend_from_slice(row);
     }
     let mean = (total / out.len().max(1) as f64) as f32;
     out.iter_mut().for_each(|x| *x -= mean);

@@ -1019,3 +1019,127 @@ fn near_depth_edges_marks_steps_and_hole_borders_within_the_radius() {
     let near = super::matcher::near_depth_edges(&result, 3.5, 0);
     assert_eq!(near.iter().filter(|&&n| n).count(), 5); // the hole and its 4 neighbours
 }
+
+/// A rectified (left, right) pair.
+type Pair = (Image<f32>, Image<f32>);
+
+/// K shots of a plane under K independent patterns: one pair per pattern seed.
+fn plane_sequence(rig: &StereoRig, shots: u64) -> (Scene, Vec<Pair>) {
+    let planes = || {
+        vec![Plane::from_point_normal(
+            rig,
+            [0.0, 0.0, 0.6],
+            [0.2, 0.1, -1.0],
+        )]
+    };
+    let pairs = (0..shots)
+        .map(|k| scene(W, H, planes(), vec![], 40 + k).render_pair())
+        .collect();
+    (scene(W, H, planes(), vec![], 40), pairs)
+}
+
+fn match_sequence(pairs: &[Pair], config: &StereoMatcherConfig) -> StereoResult {
+    let left: Vec<&Image<f32>> = pairs.iter().map(|p| &p.0).collect();
+    let right: Vec<&Image<f32>> = pairs.iter().map(|p| &p.1).collect();
+    match_stereo_sequence(&left, &right, config, None).unwrap()
+}
+
+/// K copies of one pair: the space-time window holds each value K times, so its means, norms
+/// and cross term all scale alike and every ZNCC is the single-shot one — up to f32 rounding of
+/// the running sums (relative ~1e-6 of a score, far below the 1e-3 subpixel resolution that
+/// would move a disparity by more than 1e-3 px).
+#[test]
+fn repeated_shots_match_like_one() {
+    let rig = test_rig();
+    let config = test_config(&rig);
+    let (_, pairs) = plane_sequence(&rig, 1);
+    let single = match_sequence(&pairs, &config);
+    let repeated = match_sequence(&vec![pairs[0].clone(); 4], &config);
+    let (mut same_status, mut max_diff) = (0usize, 0.0f32);
+    let n = single.status.data().len();
+    for i in 0..n {
+        if single.status.data()[i] == repeated.status.data()[i] {
+            same_status += 1;
+        }
+        let (a, b) = (
+            single.disparity_px.data()[i],
+            repeated.disparity_px.data()[i],
+        );
+        if a.is_finite() && b.is_finite() {
+            max_diff = max_diff.max((a - b).abs());
+        }
+    }
+    // A status can flip only where a score sits within rounding of a threshold: a handful.
+    assert!(
+        same_status as f64 >= 0.999 * n as f64,
+        "{same_status} of {n}"
+    );
+    assert!(
+        max_diff < 1e-3,
+        "largest disparity difference {max_diff} px"
+    );
+    assert_eq!(
+        match_stereo_sequence(&[], &[], &config, None).unwrap_err(),
+        StereoError::ShotCount { left: 0, right: 0 }
+    );
+    let (l, r) = (&pairs[0].0, &pairs[0].1);
+    assert_eq!(
+        match_stereo_sequence(&[l, l], &[r], &config, None).unwrap_err(),
+        StereoError::ShotCount { left: 2, right: 1 }
+    );
+}
+
+/// Eight patterns against one with a 3×3 window on a slanted plane (the 11×11 single shot is
+/// printed for reference). A single 3×3 shot has 9 samples of a ≈ 2.2 px binary texture: too
+/// few to be unique, it loses coverage and makes gross errors. Eight shots hold 72 samples:
+/// unique everywhere (coverage > 99 %, no error ≥ 1 px), and the disparity's Fisher
+/// information is 8× (eq 2–3 summed over shots), so the noise part of the RMSE falls by
+/// √8 ≈ 2.8; subpixel (pixel-locking) bias does not average over shots — the fractional
+/// disparity is the same in every shot — so only a factor 2 is asserted.
+#[test]
+fn eight_shots_make_a_3x3_window_dense_and_accurate() {
+    let rig = test_rig();
+    let base = test_config(&rig);
+    let small = StereoMatcherConfig {
+        window_radius_px: 1,
+        edge_windows: None,
+        ..base
+    };
+    let (scene, pairs) = plane_sequence(&rig, 8);
+    let region = interior(&base);
+    let all = |_, _| true;
+    let e_single_large = errors(
+        &scene,
+        &rig,
+        &match_sequence(&pairs[..1], &base),
+        region,
+        all,
+    );
+    let e_single_small = errors(
+        &scene,
+        &rig,
+        &match_sequence(&pairs[..1], &small),
+        region,
+        all,
+    );
+    let e_multi_small = errors(&scene, &rig, &match_sequence(&pairs, &small), region, all);
+    println!(
+        "slanted plane: 1 shot 11×11 {:.4} px, cov {:.3}; 1 shot 3×3 {:.4} px, cov {:.3}; 8 shots 3×3 {:.4} px, cov {:.3}",
+        e_single_large.rmse_px,
+        e_single_large.coverage(),
+        e_single_small.rmse_px,
+        e_single_small.coverage(),
+        e_multi_small.rmse_px,
+        e_multi_small.coverage()
+    );
+    assert!(e_multi_small.coverage() > 0.99, "{e_multi_small:?}");
+    assert!(
+        e_multi_small.rmse_px < 0.5 * e_single_small.rmse_px,
+        "{e_multi_small:?} vs {e_single_small:?}"
+    );
+    assert!(e_multi_small.max_abs_px < 1.0, "{e_multi_small:?}");
+    assert!(
+        e_single_small.coverage() < e_multi_small.coverage() - 0.1,
+        "{e_single_small:?}"
+    );
+}

@@ -1,11 +1,14 @@
 //! Per-window mean and spread of an image, from a summed-area table: O(1) per window whatever
 //! its size.
 
-/// Sums over the `(2r + 1)²` window centred on each pixel of a `width × height` buffer.
+/// Sums over the `(2r + 1)²` window centred on each pixel of a `width × height` buffer, over
+/// all of its K shots (planes stacked one after another in `data`): a space-time window of
+/// `n = (2r + 1)² · K` values.
 ///
 /// For centres whose window fits in the buffer: `sum[i] = Σ x` and `inv_norm[i] = 1/√(Σ (x − x̄)²)`
-/// (the ZNCC denominator's factor), or 0 when the window's standard deviation is below
-/// `min_std` (too little texture to match). Both are 0 where the window does not fit.
+/// (the ZNCC denominator's factor, x̄ the space-time mean), or 0 when the window's standard
+/// deviation is below `min_std` (too little texture to match). Both are 0 where the window does
+/// not fit.
 pub(super) struct WindowStats {
     pub sum: Vec<f32>,
     pub inv_norm: Vec<f32>,
@@ -13,7 +16,9 @@ pub(super) struct WindowStats {
 
 impl WindowStats {
     pub fn compute(data: &[f32], width: usize, height: usize, radius: usize, min_std: f32) -> Self {
-        debug_assert_eq!(data.len(), width * height);
+        let plane = width * height;
+        let shots = data.len().checked_div(plane).unwrap_or(1);
+        debug_assert_eq!(data.len(), plane * shots);
         let mut sum = vec![0.0f32; width * height];
         let mut inv_norm = vec![0.0f32; width * height];
         let side = 2 * radius + 1;
@@ -26,17 +31,22 @@ impl WindowStats {
         let mut s2 = vec![0.0f64; stride * (height + 1)];
         for y in 0..height {
             let (mut row1, mut row2) = (0.0f64, 0.0f64);
-            let row = &data[y * width..(y + 1) * width];
-            for (x, &value) in row.iter().enumerate() {
-                let value = value as f64;
+            for x in 0..width {
+                // Over the shots; one shot adds exactly x and x².
+                let (mut value, mut square) = (0.0f64, 0.0f64);
+                for k in 0..shots {
+                    let shot = data[k * plane + y * width + x] as f64;
+                    value += shot;
+                    square += shot * shot;
+                }
                 row1 += value;
-                row2 += value * value;
+                row2 += square;
                 let i = (y + 1) * stride + x + 1;
                 s1[i] = s1[i - stride] + row1;
                 s2[i] = s2[i - stride] + row2;
             }
         }
-        let n = (side * side) as f64;
+        let n = (side * side * shots) as f64;
         let min_norm2 = (min_std as f64).powi(2) * n;
         for y in radius..height - radius {
             let (top, bottom) = ((y - radius) * stride, (y + radius + 1) * stride);
