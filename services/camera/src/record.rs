@@ -28,8 +28,9 @@ pub fn to_8bit(img: &Image<u16>, max_dn: u16) -> Image<u8> {
     img.map(|d| (d as u32 * 255 / max_dn.max(1) as u32) as u8)
 }
 
-/// One view as a BOP image: camera, depth, left/right patterns (8-bit), and the annotations of
-/// [`write_bop_annotations`] for the parts at `poses` (scene labels 1..=N), all as `obj_id`.
+/// One view as a BOP image: camera, depth, left/right patterns of every shot (8-bit), and the
+/// annotations of [`write_bop_annotations`] for the parts at `poses` (scene labels 1..=N), all
+/// as `obj_id`.
 pub fn write_bop_image(
     bop: &mut BopSceneWriter,
     im_id: u32,
@@ -40,11 +41,14 @@ pub fn write_bop_image(
 ) -> Result<(), RecordError> {
     bop.write_depth(im_id, &capture.depth)?;
     let max_dn = camera.config.sensor.max_dn();
-    for (side, image) in [
-        (StereoSide::Left, &capture.left),
-        (StereoSide::Right, &capture.right),
-    ] {
-        bop.write_pattern(im_id, side, &PatternImage::Bits8(to_8bit(image, max_dn)))?;
+    for (index, side) in [StereoSide::Left, StereoSide::Right]
+        .into_iter()
+        .enumerate()
+    {
+        for (shot, image) in capture.shot_images(index).into_iter().enumerate() {
+            let pattern = PatternImage::Bits8(to_8bit(image, max_dn));
+            bop.write_pattern_shot(im_id, side, shot, &pattern)?;
+        }
     }
     write_bop_annotations(
         bop,

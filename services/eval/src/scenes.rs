@@ -40,6 +40,8 @@ pub struct SceneSpec {
     pub matcher: String,
     /// The matching window's radius, px (the rest of the matcher is the camera's default).
     pub window_radius_px: u32,
+    /// Patterns projected per view (the space-time matcher matches over all of them).
+    pub shots: u32,
     pub instances: u32,
     pub views: u32,
     pub width_px: u32,
@@ -88,7 +90,7 @@ pub fn ensure_scene(
 pub fn capture_config(rig: &SliRig, spec: &SceneSpec) -> anyhow::Result<CaptureConfig> {
     let mut config = CaptureConfig {
         samples_per_pixel: spec.spp,
-        ..CaptureConfig::for_rig(rig)?
+        ..CaptureConfig::for_rig_and_shots(rig, spec.shots)?
     };
     let r = spec.window_radius_px;
     config.matcher.window_radius_px = r;
@@ -245,16 +247,16 @@ pub fn load_scene(
         };
         let t_w_c = t_c_w.inverse();
         let depth = reader.depth(im_id)?;
-        let (left, _) = pattern_as_normalised(reader.pattern(im_id, StereoSide::Left)?);
-        let (right, _) = pattern_as_normalised(reader.pattern(im_id, StereoSide::Right)?);
-        let sigma_image = depth_sigma(
-            std::slice::from_ref(&left),
-            std::slice::from_ref(&right),
-            &depth,
-            &rig.stereo,
-            &noise,
-            window_radius,
-        )?;
+        // eq 1–5 over every shot of the view (the space-time window's gradients).
+        let shots = |side| -> anyhow::Result<Vec<Image<f32>>> {
+            Ok(reader
+                .pattern_shots(im_id, side)?
+                .into_iter()
+                .map(|p| pattern_as_normalised(p).0)
+                .collect())
+        };
+        let (left, right) = (shots(StereoSide::Left)?, shots(StereoSide::Right)?);
+        let sigma_image = depth_sigma(&left, &right, &depth, &rig.stereo, &noise, window_radius)?;
         let gts = reader.gt(im_id).unwrap_or(&[]).to_vec();
         let infos = reader.gt_info(im_id).map(|i| i.to_vec());
         let mut objects = Vec::new();

@@ -53,6 +53,8 @@ pub struct RefineExperiment {
     pub tune_scenes: u32,
     /// Control: paint the parts with the matte diffuse twin (scenes cached separately).
     pub matte: bool,
+    /// Patterns the mock camera projects per view (space-time matching over all of them).
+    pub shots: u32,
     /// The mock camera's matching window radius, px.
     pub window_radius_px: u32,
     /// Mask erosion before refinement, px (default: the window radius).
@@ -320,6 +322,7 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
     let mut spec = SceneSpec {
         matcher: String::new(),
         window_radius_px,
+        shots: args.shots,
         instances: args.instances,
         views: args.views_per_scene,
         width_px: args.resolution.0,
@@ -531,11 +534,14 @@ fn write_outputs(
         table,
         "# Pose refinement on mock-camera data (Table I layout)\n\n\
          Correct-detection rates (%) at (5 mm, 5°) and (2 mm, 2°), symmetry-aware, over GT instances ≥ 80 % visible in the \
-         reference view. Mock SLI camera (physically based renders, real stereo matching), {}×{} px, {} spp, {} parts per bin, \
-         {} scenes × {} views per part, seed {}. Synthetic data, not ROBI.\n",
+         reference view. Mock SLI camera (physically based renders, real stereo matching), {}×{} px, {} spp, {} shot(s) per view \
+         matched over {}×{} px windows, {} parts per bin, {} scenes × {} views per part, seed {}. Synthetic data, not ROBI.\n",
         args.resolution.0,
         args.resolution.1,
         args.spp,
+        args.shots,
+        2 * args.window_radius_px + 1,
+        2 * args.window_radius_px + 1,
         args.instances,
         args.scenes,
         args.views_per_scene,

@@ -51,13 +51,17 @@ pub struct RefineArgs {
     /// ground-truth metal (scenes are cached separately).
     #[arg(long)]
     pub matte: bool,
-    /// The mock camera's matching window radius, px. Default 3 (7×7, edge pass 5×5), not the
-    /// camera's general-purpose 5 (11×11): an 11×11 window spans ~5 mm at 0.5 m, the size of
-    /// these parts' features, and its depth bias pulls the refined orientation. Measured on
-    /// eye-bolt, gear, zigzag (2 scenes each): SDF 2 mm/2° at 4 views 18.9 % with r = 3
-    /// against 4.5 % with r = 5.
-    #[arg(long, default_value_t = 3)]
-    pub window_radius_px: u32,
+    /// Patterns the mock camera projects per view; it matches over all of them (space-time
+    /// windows). Default: the camera's (8, chosen by `glint eval camera` on geometry with a
+    /// known answer); 1 is the single-shot camera of earlier Table I runs.
+    #[arg(long, default_value_t = glint_camera::capture::DEFAULT_SHOTS, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub shots: u32,
+    /// The mock camera's matching window radius, px. Default: the camera's for --shots (3×3
+    /// from 4 shots on, 5×5 for 2–3, 11×11 for one; from the same `glint eval camera` table).
+    /// Single-shot Table I runs used 3 (7×7): on eye-bolt, gear, zigzag (2 scenes each) SDF
+    /// 2 mm/2° at 4 views was 18.9 % with r = 3 against 4.5 % with r = 5.
+    #[arg(long)]
+    pub window_radius_px: Option<u32>,
     /// Mask erosion before refinement, px: only pixels whose window of this radius lies inside
     /// the object's mask give points (both refiners). Default: the matcher's window radius, so
     /// no point's depth was matched across a silhouette.
@@ -95,7 +99,10 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
         icp_distances_mm: args.icp_distances_mm.clone(),
         tune_scenes: args.tune_scenes,
         matte: args.matte,
-        window_radius_px: args.window_radius_px,
+        shots: args.shots,
+        window_radius_px: args
+            .window_radius_px
+            .unwrap_or_else(|| glint_camera::capture::default_window_radius_px(args.shots)),
         erode_px: args.erode_px,
         sdf_voxel_mm: args.sdf_voxel_mm,
         out: args.out.clone(),

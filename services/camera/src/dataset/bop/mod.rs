@@ -18,6 +18,7 @@
 //! `scene_camera_xyz.json`, `gray_xyz/`, `mask_visib_xyz/`, ... ([`BopSceneLayout::for_sensor`]).
 //!
 //! Glint's captures add `glint/pattern_left/XXXXXX.png`, `glint/pattern_right/XXXXXX.png`
+//! (a multi-shot capture's later shots as `XXXXXX_01.png`, `XXXXXX_02.png`, ...)
 //! (8- or 16-bit structured-light images), `glint/gt_materials.json` (free-form, from the
 //! caller), and for calibration `glint/exposure_stack/XXXXXX/`, `glint/rig.json` and
 //! `glint/gt_sensor.json`. BOP tools ignore the `glint/` directory.
@@ -153,6 +154,16 @@ impl BopSceneLayout {
     /// `glint/pattern_left/XXXXXX.png`.
     pub fn pattern_png(&self, im_id: u32, side: StereoSide) -> PathBuf {
         self.pattern_dir(side).join(image_file_name(im_id, "png"))
+    }
+    /// Shot `shot` of a multi-shot capture: shot 0 is [`Self::pattern_png`], later ones
+    /// `glint/pattern_left/XXXXXX_KK.png` (KK = 01, 02, ...).
+    pub fn pattern_shot_png(&self, im_id: u32, side: StereoSide, shot: usize) -> PathBuf {
+        if shot == 0 {
+            self.pattern_png(im_id, side)
+        } else {
+            self.pattern_dir(side)
+                .join(format!("{im_id:06}_{shot:02}.png"))
+        }
     }
     /// `glint/gt_materials.json`.
     pub fn gt_materials_json(&self) -> PathBuf {

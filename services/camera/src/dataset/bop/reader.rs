@@ -233,6 +233,23 @@ impl BopSceneReader {
         pattern_from(&path, decode_image(&path)?)
     }
 
+    /// Every shot of a view's pattern images, in projection order: shot 0 and then
+    /// `XXXXXX_01.png`, ... as long as they exist (a single-shot capture gives one).
+    pub fn pattern_shots(
+        &self,
+        im_id: u32,
+        side: StereoSide,
+    ) -> Result<Vec<PatternImage>, DatasetError> {
+        let mut shots = vec![self.pattern(im_id, side)?];
+        loop {
+            let path = self.layout.pattern_shot_png(im_id, side, shots.len());
+            if !path.is_file() {
+                return Ok(shots);
+            }
+            shots.push(pattern_from(&path, decode_image(&path)?)?);
+        }
+    }
+
     /// Glint's `glint/gt_materials.json`, `None` if the scene has none.
     pub fn gt_materials(&self) -> Result<Option<serde_json::Value>, DatasetError> {
         let path = self.layout.gt_materials_json();

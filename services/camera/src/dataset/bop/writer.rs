@@ -153,7 +153,19 @@ impl BopSceneWriter {
         side: StereoSide,
         pattern: &PatternImage,
     ) -> Result<(), DatasetError> {
-        let path = self.layout.pattern_png(im_id, side);
+        self.write_pattern_shot(im_id, side, 0, pattern)
+    }
+
+    /// Writes shot `shot` of a multi-shot capture's pattern images
+    /// ([`BopSceneLayout::pattern_shot_png`]); shot 0 is [`Self::write_pattern`]'s file.
+    pub fn write_pattern_shot(
+        &mut self,
+        im_id: u32,
+        side: StereoSide,
+        shot: usize,
+        pattern: &PatternImage,
+    ) -> Result<(), DatasetError> {
+        let path = self.layout.pattern_shot_png(im_id, side, shot);
         self.claim_size(im_id, pattern.size(), &path)?;
         create_directory(&self.layout.pattern_dir(side))?;
         match pattern {

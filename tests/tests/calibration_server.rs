@@ -1,0 +1,181 @@
+//! The calibration server over real gRPC on loopback: a mock camera's exposure stack streamed in
+//! chunks gives the same response as the library call; bad input answers INVALID_ARGUMENT
+//! naming the field; health reports SERVING, and NOT_SERVING once shutdown begins.
+
+use std::time::Duration;
+
+use glint_calibration::response::{DebevecConfig, ExposureStack, calibrate};
+use glint_calibration::server::{Calibration, SERVICE_NAME, response_to_message};
+use glint_camera::materials;
+use glint_camera::setup::{BinSetup, BinSetupSpec};
+use glint_geometry::Part;
+use glint_proto::chunks::{OutgoingArray, chunks};
+use glint_proto::v1;
+use glint_proto::v1::calibration_service_client::CalibrationServiceClient;
+use glint_server::{HealthStatus, ServeConfig};
+use tokio_stream::StreamExt;
+use tonic_health::pb::HealthCheckRequest;
+use tonic_health::pb::health_client::HealthClient;
+
+/// A small white-pattern exposure stack of a Zigzag bin from the mock camera.
+fn mock_stack() -> glint_camera::exposure::ExposureStack {
+    let setup = BinSetup::new(
+        &Part::Zigzag.mesh(),
+        materials::ground_truth(Part::Zigzag),
+        &BinSetupSpec {
+            instances: 3,
+            seed: 2,
+            width_px: 96,
+            height_px: 80,
+            samples_per_pixel: 2,
+        },
+    )
+    .unwrap();
+    let t_w_c = setup.views(1)[0];
+    let exposures_s = [0.5e-3, 1e-3, 2e-3, 4e-3, 8e-3, 16e-3, 32e-3];
+    setup
+        .camera()
+        .capture_exposure_stack(&t_w_c, &exposures_s, 5)
+        .unwrap()
+        .0
+}
+
+fn stream_of(
+    stack: &glint_camera::exposure::ExposureStack,
+    bit_depth: u32,
+) -> Vec<v1::ExposureStackChunk> {
+    use v1::exposure_stack_chunk::Part;
+    let arrays: Vec<OutgoingArray> = stack
+        .left
+        .iter()
+        .enumerate()
+        .map(|(i, img)| OutgoingArray::image(&format!("exposure_{i:03}"), v1::Image::from(img)))
+        .collect();
+    let header = v1::ExposureStackHeader {
+        exposures_s: stack.exposures_s.clone(),
+        arrays: arrays.iter().map(|a| a.header.clone()).collect(),
+        bit_depth,
+        lambda: 0.0,
+        samples: 0,
+    };
+    std::iter::once(v1::ExposureStackChunk {
+        part: Some(Part::Header(header)),
+    })
+    .chain(chunks(&arrays).map(|c| v1::ExposureStackChunk {
+        part: Some(Part::Chunk(c)),
+    }))
+    .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn calibrate_response_over_grpc_matches_the_library() {
+    let listener = glint_server::bind("127.0.0.1:0").await.unwrap();
+    let target = format!("http://{}", listener.local_addr().unwrap());
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(glint_server::serve(
+        listener,
+        tonic::service::Routes::new(Calibration.into_service()),
+        ServeConfig {
+            services: vec![SERVICE_NAME],
+            drain_timeout: Duration::from_millis(300),
+        },
+        async {
+            let _ = stop_rx.await;
+        },
+    ));
+
+    let status = glint_server::healthcheck(&target, SERVICE_NAME, Duration::from_secs(5))
+        .await
+        .unwrap();
+    assert_eq!(status, HealthStatus::Serving);
+
+    // Default client limits: every message of the stream is under 4 MiB.
+    let mut client = CalibrationServiceClient::connect(target.clone())
+        .await
+        .unwrap();
+    let stack = mock_stack();
+    let bits = u32::from(stack.bit_depth);
+    let reply = client
+        .calibrate_response(tokio_stream::iter(stream_of(&stack, bits)))
+        .await
+        .unwrap()
+        .into_inner();
+    let direct = calibrate(
+        &ExposureStack::new(
+            stack.left.clone(),
+            stack.exposures_s.clone(),
+            stack.bit_depth,
+        )
+        .unwrap(),
+        &DebevecConfig::default(),
+    )
+    .unwrap();
+    let got = reply.response.unwrap();
+    let want = response_to_message(&direct);
+    // The same deterministic solve on the same bytes: identical numbers.
+    assert_eq!(got, want);
+    assert_eq!(reply.samples_used as usize, direct.solve.samples);
+
+    // Bad input: the field is named and the code is INVALID_ARGUMENT.
+    let bad_depth = client
+        .calibrate_response(tokio_stream::iter(stream_of(&stack, 0)))
+        .await
+        .unwrap_err();
+    assert_eq!(bad_depth.code(), tonic::Code::InvalidArgument);
+    assert!(
+        bad_depth.message().contains("header.bit_depth"),
+        "{bad_depth:?}"
+    );
+    let mut truncated = stream_of(&stack, bits);
+    truncated.pop();
+    let early_end = client
+        .calibrate_response(tokio_stream::iter(truncated))
+        .await
+        .unwrap_err();
+    assert_eq!(early_end.code(), tonic::Code::InvalidArgument);
+    assert!(
+        early_end.message().contains("header.arrays"),
+        "{early_end:?}"
+    );
+    let mut one = stream_of(&stack, bits);
+    one.truncate(2); // the header and one image's chunk, but the header declares seven
+    if let Some(v1::exposure_stack_chunk::Part::Header(h)) = &mut one[0].part {
+        h.arrays.truncate(1);
+        h.exposures_s.truncate(1);
+    }
+    let single = client
+        .calibrate_response(tokio_stream::iter(one))
+        .await
+        .unwrap_err();
+    assert_eq!(single.code(), tonic::Code::InvalidArgument, "{single:?}");
+    assert!(single.message().contains("at least 2"), "{single:?}");
+
+    // Health goes NOT_SERVING as soon as shutdown begins (a watcher sees it while the server
+    // drains).
+    let channel = tonic::transport::Endpoint::from_shared(target.clone())
+        .unwrap()
+        .connect()
+        .await
+        .unwrap();
+    let mut watch = HealthClient::new(channel)
+        .watch(HealthCheckRequest {
+            service: SERVICE_NAME.into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    let first = watch.next().await.unwrap().unwrap();
+    assert_eq!(first.status(), HealthStatus::Serving);
+    stop_tx.send(()).unwrap();
+    let next = tokio::time::timeout(Duration::from_secs(5), watch.next())
+        .await
+        .expect("a status change within 5 s")
+        .unwrap()
+        .unwrap();
+    assert_eq!(next.status(), HealthStatus::NotServing);
+    tokio::time::timeout(Duration::from_secs(5), server)
+        .await
+        .expect("the server stops within its drain bound")
+        .unwrap()
+        .unwrap();
+}
