@@ -502,9 +502,6 @@ pub fn depth_quality(
 mod tests {
     use super::*;
     use crate::materials;
-    use glint_geometry::TriMesh;
-    use glint_render::scene::SceneInstance;
-    use nalgebra::{Point3, Vector3};
 
     /// A multi-shot capture of the plane at 0.6 m (320×256: 13.1 mm of depth per pixel of
     /// disparity) with a 5×5 window: K shots, each its own pattern and noise, K = 1 identical
@@ -573,61 +570,16 @@ mod tests {
     }
 
     fn plane_scene() -> Scene {
-        let half = 1.0f32;
-        let plane = TriMesh::new(
-            vec![
-                Point3::new(-half, -half, 0.0),
-                Point3::new(half, -half, 0.0),
-                Point3::new(half, half, 0.0),
-                Point3::new(-half, half, 0.0),
-            ],
-            vec![[0, 1, 2], [0, 2, 3]],
-        );
-        let instance = SceneInstance {
-            mesh: 0,
-            t_w_o: Isometry3::identity(),
-            material: 0,
-            label: 1,
-        };
-        Scene::build(&[plane], vec![instance], vec![materials::diffuse_twin()]).unwrap()
+        crate::setup::plane_scene(1.0, materials::diffuse_twin()).unwrap()
     }
 
-    /// Looking straight down at the plane z = 0 from `height_m`.
-    fn looking_down(height_m: f64) -> Isometry3<f64> {
-        Isometry3::face_towards(
-            &Point3::new(0.0, 0.0, height_m),
-            &Point3::origin(),
-            &Vector3::y(),
-        )
-    }
+    use crate::setup::looking_down;
 
     #[test]
     fn diffuse_plane_at_0_6_m_gives_accurate_dense_depth() {
-        let half = 1.0f32;
-        let plane = TriMesh::new(
-            vec![
-                Point3::new(-half, -half, 0.0),
-                Point3::new(half, -half, 0.0),
-                Point3::new(half, half, 0.0),
-                Point3::new(-half, half, 0.0),
-            ],
-            vec![[0, 1, 2], [0, 2, 3]],
-        );
-        let instance = SceneInstance {
-            mesh: 0,
-            t_w_o: Isometry3::identity(),
-            material: 0,
-            label: 1,
-        };
-        let scene =
-            Scene::build(&[plane], vec![instance], vec![materials::diffuse_twin()]).unwrap();
+        let scene = plane_scene();
         let rig = SliRig::ensenso_n35();
-        // Looking straight down at the plane from 0.6 m.
-        let t_w_c = Isometry3::face_towards(
-            &Point3::new(0.0, 0.0, 0.6),
-            &Point3::origin(),
-            &Vector3::y(),
-        );
+        let t_w_c = looking_down(0.6);
         let config = CaptureConfig {
             samples_per_pixel: 1,
             ..CaptureConfig::for_rig(&rig).unwrap()

@@ -124,6 +124,40 @@ impl BinSetup {
     }
 }
 
+/// A flat square of side `2·half_m` in the plane z = 0 of the world, centred on the origin,
+/// in `material` (label 1): the reference target cameras are validated on.
+pub fn plane_scene(half_m: f32, material: PrincipledParams<f32>) -> Result<Scene, SceneError> {
+    use glint_render::scene::SceneInstance;
+    use nalgebra::Point3;
+    let plane = TriMesh::new(
+        vec![
+            Point3::new(-half_m, -half_m, 0.0),
+            Point3::new(half_m, -half_m, 0.0),
+            Point3::new(half_m, half_m, 0.0),
+            Point3::new(-half_m, half_m, 0.0),
+        ],
+        vec![[0, 1, 2], [0, 2, 3]],
+    );
+    let instance = SceneInstance {
+        mesh: 0,
+        t_w_o: Isometry3::identity(),
+        material: 0,
+        label: 1,
+    };
+    Scene::build(&[plane], vec![instance], vec![material])
+}
+
+/// A camera pose (camera → world) straight above the world origin at `height_m`, looking down
+/// at it, image y along world +y.
+pub fn looking_down(height_m: f64) -> Isometry3<f64> {
+    use nalgebra::{Point3, Vector3};
+    Isometry3::face_towards(
+        &Point3::new(0.0, 0.0, height_m),
+        &Point3::origin(),
+        &Vector3::y(),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -19,16 +19,14 @@ use glint_camera::capture::{CaptureConfig, MockSliCamera, depth_quality};
 use glint_camera::edge_errors::distance_to_depth_edge;
 use glint_camera::materials;
 use glint_camera::setup::{BinSetup, BinSetupSpec, capture_seed};
-use glint_geometry::TriMesh;
 use glint_geometry::camera::PinholeIntrinsics;
 use glint_geometry::image::{DepthMap, Image};
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::parts::Part;
 use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use glint_render::rig::SliRig;
-use glint_render::scene::{Scene, SceneInstance};
 use glint_render::stereo::StereoMatcherConfig;
-use nalgebra::{Isometry3, Point3, Vector3};
+use nalgebra::Isometry3;
 
 #[derive(clap::Args)]
 pub struct CameraArgs {
@@ -303,29 +301,9 @@ fn accumulate(
 
 /// The diffuse plane at 0.6 m, head-on, per K and r: (markdown, CSV).
 fn plane_table(args: &CameraArgs) -> anyhow::Result<(String, String)> {
-    let half = 1.0f32;
-    let plane = TriMesh::new(
-        vec![
-            Point3::new(-half, -half, 0.0),
-            Point3::new(half, -half, 0.0),
-            Point3::new(half, half, 0.0),
-            Point3::new(-half, half, 0.0),
-        ],
-        vec![[0, 1, 2], [0, 2, 3]],
-    );
-    let instance = SceneInstance {
-        mesh: 0,
-        t_w_o: Isometry3::identity(),
-        material: 0,
-        label: 1,
-    };
-    let scene = Scene::build(&[plane], vec![instance], vec![materials::diffuse_twin()])?;
+    let scene = glint_camera::setup::plane_scene(1.0, materials::diffuse_twin())?;
     let rig = SliRig::ensenso_n35().resized(args.resolution.0, args.resolution.1)?;
-    let t_w_c = Isometry3::face_towards(
-        &Point3::new(0.0, 0.0, 0.6),
-        &Point3::origin(),
-        &Vector3::y(),
-    );
+    let t_w_c = glint_camera::setup::looking_down(0.6);
     let k_max = *args.shots.iter().max().unwrap_or(&1);
     let base = CaptureConfig {
         samples_per_pixel: args.spp,
