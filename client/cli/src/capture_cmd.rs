@@ -29,20 +29,11 @@ pub struct CaptureArgs {
     /// eye-bolt, tube-fitting, chrome-screw, gear or zigzag.
     #[arg(long, value_parser = crate::mesh_cmd::parse_part)]
     pub part: Part,
-    /// Parts in the bin.
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=40))]
-    pub instances: u32,
+    #[command(flatten)]
+    pub bin: BinArgs,
     /// Views, spread over a spherical cap above the bin.
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=200))]
     pub views: u32,
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    /// Camera resolution, WIDTHxHEIGHT (the N35's field of view is kept).
-    #[arg(long, default_value = "1280x1024", value_parser = parse_resolution)]
-    pub resolution: (u32, u32),
-    /// Samples per pixel of the multi-path renders.
-    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=1024))]
-    pub spp: u32,
     /// Instead of depth captures, take a white-pattern exposure stack of the left camera per
     /// view (for calibrating the camera response). Exposure times in MILLISECONDS, comma
     /// separated, e.g. `0.25,0.5,1,2,4,8`. Given without a list: 0.25,0.5,1,2,4,8,16,32,64 ms,
@@ -63,6 +54,36 @@ pub struct CaptureArgs {
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// The mock bin a capturing command sets up (`glint capture`, `glint eval uncertainty`).
+#[derive(clap::Args, Clone, Debug)]
+pub struct BinArgs {
+    /// Parts in the bin.
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=40))]
+    pub instances: u32,
+    /// Seed of the drop and of the captures' noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Camera resolution, WIDTHxHEIGHT (the N35's field of view is kept).
+    #[arg(long, default_value = "1280x1024", value_parser = parse_resolution)]
+    pub resolution: (u32, u32),
+    /// Samples per pixel of the multi-path renders.
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub spp: u32,
+}
+
+impl BinArgs {
+    /// The set-up these flags describe.
+    pub fn spec(&self) -> BinSetupSpec {
+        BinSetupSpec {
+            instances: self.instances,
+            seed: self.seed,
+            width_px: self.resolution.0,
+            height_px: self.resolution.1,
+            samples_per_pixel: self.spp,
+        }
+    }
 }
 
 /// The default exposure stack, milliseconds (the default sensor's own Δt is 10 ms).
@@ -105,17 +126,7 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let mesh = args.part.mesh();
-    let shiny = BinSetup::new(
-        &mesh,
-        materials::ground_truth(args.part),
-        &BinSetupSpec {
-            instances: args.instances,
-            seed: args.seed,
-            width_px: args.resolution.0,
-            height_px: args.resolution.1,
-            samples_per_pixel: args.spp,
-        },
-    )?;
+    let shiny = BinSetup::new(&mesh, materials::ground_truth(args.part), &args.bin.spec())?;
     let matte = shiny.repainted(&mesh, materials::diffuse_twin())?;
     let (rig, bin, poses) = (shiny.rig, shiny.bin, &shiny.poses);
     let radius = shiny.config.matcher.window_radius_px;
@@ -130,12 +141,12 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
          | view | instance | pixels | missing (shiny) | missing (diffuse) | RMSE shiny (mm) | RMSE diffuse (mm) | >5 mm shiny | saturated | low SNR | inter-reflection | other |\n\
          |---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         args.part.display_name(),
-        args.instances,
+        args.bin.instances,
         args.views,
-        args.seed,
-        args.resolution.0,
-        args.resolution.1,
-        args.spp
+        args.bin.seed,
+        args.bin.resolution.0,
+        args.bin.resolution.1,
+        args.bin.spp
     );
     // BOP layout: models/ (mm) and one scene, test/000001/, one image per view.
     const OBJ_ID: u32 = 1;
@@ -181,10 +192,10 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
     let bar = glint_eval::progress::bar(views.len() as u64, "capture");
     let mut totals: [Vec<DepthQuality>; 2] = Default::default();
     let mut cause_totals = [0usize; 4];
-    let part_labels: Vec<u16> = (1..=args.instances as u16).collect();
+    let part_labels: Vec<u16> = (1..=args.bin.instances as u16).collect();
     let mut edge_totals: [Vec<EdgeBin>; 2] = Default::default();
     for (k, t_w_c) in views.iter().enumerate() {
-        let seed = capture_seed(args.seed, k);
+        let seed = capture_seed(args.bin.seed, k);
         let start = Instant::now();
         let (captures, truths): (Vec<StereoCapture>, Vec<CaptureTruth>) = cameras
             .iter()
@@ -235,7 +246,7 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
                 }
             }
         }
-        for label in 1..=args.instances as u16 {
+        for label in 1..=args.bin.instances as u16 {
             let q: Vec<_> = captures
                 .iter()
                 .zip(&truths)
@@ -404,18 +415,18 @@ fn run_exposure_stacks(
          under-exposed (below {:.0} % of full scale, DN < {under_dn}) and saturated (DN = {max_dn}).\n\n\
          | view | exposure (ms) | part pixels | under-exposed | saturated |\n|---:|---:|---:|---:|---:|\n",
         args.part.display_name(),
-        args.instances,
+        args.bin.instances,
         args.views,
-        args.seed,
-        args.resolution.0,
-        args.resolution.1,
-        args.spp,
+        args.bin.seed,
+        args.bin.resolution.0,
+        args.bin.resolution.1,
+        args.bin.spp,
         ms.join(", "),
         UNDER_EXPOSED_FRACTION * 100.0,
     );
     let bar = glint_eval::progress::bar(views.len() as u64, "exposure stacks");
     for (k, t_w_c) in views.iter().enumerate() {
-        let seed = capture_seed(args.seed, k);
+        let seed = capture_seed(args.bin.seed, k);
         let (stack, truth) = camera.capture_exposure_stack(t_w_c, exposures_s, seed)?;
         let dir = bop.layout().exposure_stack_dir(k as u32);
         write_exposure_stack(&dir, &stack)?;

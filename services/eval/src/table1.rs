@@ -13,7 +13,7 @@ use glint_estimation::icp::{IcpConfig, IcpMethod, IcpModel, refine_icp};
 use glint_estimation::points::DepthPoint;
 use glint_estimation::refine::{SdfRefineConfig, refine_sdf};
 use glint_geometry::io::{read_mesh, write_file_atomically};
-use glint_geometry::pose_deviation::{CorrectThreshold, pose_deviation};
+use glint_geometry::pose_deviation::{CorrectThreshold, PoseDeviation, pose_deviation};
 use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use glint_geometry::{LengthUnit, Part, Symmetry};
 use nalgebra::{Isometry3, Point3};
@@ -106,8 +106,8 @@ pub struct Trial {
 pub struct Outcome {
     method: RefineMethod,
     t_c_o: Isometry3<f64>,
-    translation_mm: f64,
-    rotation_deg: f64,
+    /// Against the truth, symmetry-aware.
+    deviation: PoseDeviation,
     iterations: usize,
     time_ms: f64,
     status: String,
@@ -225,8 +225,7 @@ fn run_trial(
         Outcome {
             method,
             t_c_o,
-            translation_mm: e.translation_mm(),
-            rotation_deg: e.rotation_deg(),
+            deviation: e,
             iterations,
             time_ms,
             status,
@@ -276,20 +275,16 @@ fn run_trial(
 fn rates(outcomes: &[&Outcome]) -> (f64, f64) {
     let n = outcomes.len().max(1) as f64;
     let hit = |threshold: &CorrectThreshold| {
-        outcomes.iter().filter(|o| o.is_correct(threshold)).count() as f64 / n
+        outcomes
+            .iter()
+            .filter(|o| o.deviation.is_correct(threshold))
+            .count() as f64
+            / n
     };
     (
         hit(&CorrectThreshold::MM5_DEG5),
         hit(&CorrectThreshold::MM2_DEG2),
     )
-}
-
-impl Outcome {
-    /// The paper's correct-detection test on this outcome's errors.
-    fn is_correct(&self, threshold: &CorrectThreshold) -> bool {
-        self.translation_mm < threshold.translation_m * 1e3
-            && self.rotation_deg < threshold.rotation_rad.to_degrees()
-    }
 }
 
 /// Runs the experiment and writes `results.csv`, `trials.csv`, `nees.csv` and `table.md` to
@@ -396,7 +391,7 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
                     &[RefineMethod::Icp],
                 );
                 acc.1 += 1;
-                if o[0].is_correct(&CorrectThreshold::MM2_DEG2) {
+                if o[0].deviation.is_correct(&CorrectThreshold::MM2_DEG2) {
                     acc.0 += 1;
                 }
             }
@@ -519,8 +514,8 @@ fn write_outputs(
                 pose(&t.t_c_o_gt),
                 pose(&t.t_c_o_init),
                 pose(&o.t_c_o),
-                o.translation_mm,
-                o.rotation_deg,
+                o.deviation.translation_mm(),
+                o.deviation.rotation_deg(),
                 o.iterations,
                 o.time_ms,
                 o.status.replace('"', "'")
@@ -624,7 +619,7 @@ fn write_outputs(
         for &k in &args.views {
             let mut values: Vec<(f64, usize)> = select(g, k, RefineMethod::Sdf)
                 .iter()
-                .filter(|o| o.is_correct(&CorrectThreshold::MM5_DEG5))
+                .filter(|o| o.deviation.is_correct(&CorrectThreshold::MM5_DEG5))
                 .filter_map(|o| o.nees)
                 .collect();
             if values.is_empty() {

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use glint_camera::capture::{CaptureTruth, StereoCapture};
 use glint_camera::materials;
-use glint_camera::setup::{BinSetup, BinSetupSpec};
+use glint_camera::setup::BinSetup;
 use glint_estimation::depth_sigma::{NoiseModel, depth_sigma};
 use glint_geometry::Part;
 use glint_geometry::image::normalised_intensity;
@@ -20,17 +20,11 @@ use plotters::prelude::*;
 pub struct UncertaintyArgs {
     #[arg(long, default_value = "gear", value_parser = crate::mesh_cmd::parse_part)]
     pub part: Part,
-    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=40))]
-    pub instances: u32,
+    #[command(flatten)]
+    pub bin: crate::capture_cmd::BinArgs,
     /// Captures of the static scene.
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(3..=1000))]
     pub repeats: u32,
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    #[arg(long, default_value = "1280x1024", value_parser = crate::capture_cmd::parse_resolution)]
-    pub resolution: (u32, u32),
-    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=1024))]
-    pub spp: u32,
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -74,17 +68,11 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
     let setup = BinSetup::new(
         &args.part.mesh(),
         materials::ground_truth(args.part),
-        &BinSetupSpec {
-            instances: args.instances,
-            seed: args.seed,
-            width_px: args.resolution.0,
-            height_px: args.resolution.1,
-            samples_per_pixel: args.spp,
-        },
+        &args.bin.spec(),
     )?;
     let (rig, camera) = (setup.rig, setup.camera());
     let t_w_c = setup.views(1)[0];
-    let renders = camera.render_shots(&t_w_c, args.seed);
+    let renders = camera.render_shots(&t_w_c, args.bin.seed);
     let sensor = &camera.config.sensor;
     let max_dn = sensor.max_dn();
 
@@ -97,7 +85,7 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
     let mut truths: Vec<CaptureTruth> = Vec::new();
     for r in 0..args.repeats {
         let (capture, truth) =
-            camera.capture_rendered(&t_w_c, &renders, args.seed ^ (1000 + r as u64))?;
+            camera.capture_rendered(&t_w_c, &renders, args.bin.seed ^ (1000 + r as u64))?;
         captures.push(capture);
         truths.push(truth);
         bar.inc(1);
@@ -127,7 +115,7 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
     for v in 0..h {
         for u in 0..w {
             let label = truths[0].label.get(u, v).unwrap_or(0);
-            if label == 0 || label as u32 > args.instances {
+            if label == 0 || label as u32 > args.bin.instances {
                 continue; // parts only
             }
             let Some(sigma) = predicted.get(u, v).filter(|s| s.is_finite()) else {
@@ -185,10 +173,10 @@ pub fn run(args: &UncertaintyArgs) -> anyhow::Result<()> {
          | {} | {r_pearson:.3} | {r_spearman:.3} | {r_log:.3} | {median_ratio:.3} |\n\n\
          Scatter: `scatter.png`; data: `scatter.csv` (mm).\n",
         args.part.display_name(),
-        args.instances,
-        args.resolution.0,
-        args.resolution.1,
-        args.spp,
+        args.bin.instances,
+        args.bin.resolution.0,
+        args.bin.resolution.1,
+        args.bin.spp,
         args.repeats,
         spreads.len()
     );

@@ -5,6 +5,8 @@ use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::error::DatasetError;
+use crate::dataset::json::JsonNode;
+use crate::dataset::transforms::{isometry_from_rotation_and_mm, rotation_and_mm_from_isometry};
 
 /// Why GT info could not be computed from an instance's masks.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -19,8 +21,6 @@ pub enum GtInfoError {
         depth_px: Option<(u32, u32)>,
     },
 }
-use crate::dataset::json::JsonNode;
-use crate::dataset::transforms::{isometry_from_rotation_and_mm, rotation_and_mm_from_isometry};
 
 /// One annotated object instance in one image.
 #[derive(Clone, Debug, PartialEq)]

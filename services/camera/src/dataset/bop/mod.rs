@@ -18,8 +18,8 @@
 //! `scene_camera_xyz.json`, `gray_xyz/`, `mask_visib_xyz/`, ... ([`BopSceneLayout::for_sensor`]).
 //!
 //! Glint's captures add `glint/pattern_left/XXXXXX.png`, `glint/pattern_right/XXXXXX.png`
-//! (a multi-shot capture's later shots as `XXXXXX_01.png`, `XXXXXX_02.png`, ...)
-//! (8- or 16-bit structured-light images), `glint/gt_materials.json` (free-form, from the
+//! (8- or 16-bit structured-light images; a multi-shot capture's later shots beside them as
+//! `XXXXXX_01.png`, `XXXXXX_02.png`, ...), `glint/gt_materials.json` (free-form, from the
 //! caller), and for calibration `glint/exposure_stack/XXXXXX/`, `glint/rig.json` and
 //! `glint/gt_sensor.json`. BOP tools ignore the `glint/` directory.
 //!
