@@ -12,8 +12,6 @@ mod mitsuba_export;
 mod preview;
 mod serve_cmd;
 
-use std::path::PathBuf;
-
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
@@ -60,9 +58,7 @@ fn main() -> std::process::ExitCode {
         .init();
     let cli = Cli::parse();
     let result = match cli.command {
-        None => demo::run(&demo::DemoArgs {
-            out: PathBuf::from(demo::DEFAULT_OUT),
-        }),
+        None => demo::run(&demo::DemoArgs::default()),
         Some(Command::Demo(args)) => demo::run(&args),
         Some(Command::Capture(args)) => capture_cmd::run(&args),
         Some(Command::Eval(cmd)) => eval::run(cmd),

@@ -348,6 +348,18 @@ impl MockSliCamera<'_> {
         self.capture_rendered(t_w_c, &rendered, seed)
     }
 
+    /// Two more read-outs of the first shot's left radiance: what a user takes to measure the
+    /// sensor's noise (two shots of a static scene, photon transfer). Seeds `seed ^ 11` and
+    /// `seed ^ 12`, as the experiments' recorded scenes.
+    pub fn noise_shots(&self, rendered: &RenderedShots, seed: u64) -> Option<[Image<u16>; 2]> {
+        let radiance = rendered.left.first()?;
+        let sensor = &self.config.sensor;
+        Some([
+            sensor.read_out(radiance, seed ^ 11),
+            sensor.read_out(radiance, seed ^ 12),
+        ])
+    }
+
     /// The sensor read-out and matching half of [`Self::capture`], on radiance already
     /// rendered with [`Self::render_shots`]: repeated captures of a static scene differ only in
     /// sensor noise, so they can share one render. Each shot is its own read-out through the

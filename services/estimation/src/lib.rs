@@ -4,12 +4,16 @@
 //! - [`points`]: masked depth → camera-frame points → world frame (eq 6–7);
 //! - [`refine`]: uncertainty-weighted SDF Gauss–Newton / Levenberg–Marquardt over T_o_w
 //!   (eq 8–11) and the pose covariance from the Fisher information (eq 18–19);
-//! - [`icp`]: the ICP baseline (point-to-point and point-to-plane) on the same inputs.
+//! - [`icp`]: the ICP baseline (point-to-point and point-to-plane) on the same inputs;
+//! - [`nbv`]: next-best-view planning by minimum pose entropy (eq 20–23) and the heuristics;
+//! - [`view`]: one captured view → the part's depth points under a pose hypothesis.
 //!
 //! Conventions are the geometry crate's: metres, `t_a_b` maps b → a, left perturbations
 //! `T ← exp(δ)·T` with δ = (ρ, φ). Nothing here reads ground truth.
 
 pub mod depth_sigma;
 pub mod icp;
+pub mod nbv;
 pub mod points;
 pub mod refine;
+pub mod view;

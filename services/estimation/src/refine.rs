@@ -18,7 +18,7 @@
 
 use glint_geometry::sdf::SdfGrid;
 use glint_geometry::se3;
-use nalgebra::{Isometry3, Matrix6, Point3, SymmetricEigen, Vector6};
+use nalgebra::{Isometry3, Matrix3, Matrix6, Point3, SymmetricEigen, Vector3, Vector6};
 use rayon::prelude::*;
 
 use crate::points::DepthPoint;
@@ -276,6 +276,61 @@ fn huber(e: f64, k: f64) -> (f64, f64) {
     }
 }
 
+/// One point's Jacobian `J = ∇ᵀ [I | −[p_o]×] = (∇, p_o × ∇)` (eq 10) and inverse residual
+/// variance `1/Σ_sdf` with `Σ_sdf = G² σ_z² + σ_model²`, `G = ∇ᵀ R_o_w ∂p_w/∂z` (eq 11), from
+/// the SDF gradient `gradient` at the point's object-frame position `p_o`.
+#[inline(always)]
+fn point_terms(
+    gradient: &Vector3<f64>,
+    p_o: &Point3<f64>,
+    point: &DepthPoint,
+    rot_o_w: &Matrix3<f64>,
+    model_var: f64,
+) -> ([f64; 6], f64) {
+    let n = gradient;
+    let rot = p_o.coords.cross(n);
+    let gz = n.dot(&(rot_o_w * point.dp_dz_w));
+    let var = gz * gz * point.sigma_z_m * point.sigma_z_m + model_var;
+    ([n.x, n.y, n.z, rot.x, rot.y, rot.z], var.recip())
+}
+
+/// The Fisher information `Σ Jᵢᵀ Jᵢ / Σ_sdf,i` (eq 18, 21–22) of depth points expected on the
+/// surface — a candidate view's predicted measurements — at the hypothesis `t_o_w`, in the
+/// refiner's δ coordinates, with the refiner's σ_model. No gate and no robust weight: the
+/// points are predictions, not data. Points outside the SDF grid contribute nothing.
+pub fn information_of_points(
+    sdf: &SdfGrid,
+    points: &[DepthPoint],
+    t_o_w: &Isometry3<f64>,
+    model_sigma_m: f64,
+) -> Matrix6<f64> {
+    const CHUNK: usize = 1024;
+    let model_var = model_sigma_m * model_sigma_m;
+    let rot_o_w = t_o_w.rotation.to_rotation_matrix().into_inner();
+    let trans_o_w = t_o_w.translation.vector;
+    // Fixed chunks summed in order: the same points give the same matrix on any thread count.
+    let partial: Vec<SymmetricSum6> = points
+        .par_chunks(CHUNK)
+        .map(|chunk| {
+            let mut acc = SymmetricSum6::ZERO;
+            for point in chunk {
+                let p_o = Point3::from(rot_o_w * point.p_w.coords + trans_o_w);
+                let s = sdf.sample(&p_o);
+                if !s.inside_grid {
+                    continue;
+                }
+                let (j, inv_var) = point_terms(&s.gradient, &p_o, point, &rot_o_w, model_var);
+                acc.add_outer(&j, inv_var);
+            }
+            acc
+        })
+        .collect();
+    partial
+        .iter()
+        .fold(SymmetricSum6::ZERO, |a, b| a.add(b))
+        .to_matrix()
+}
+
 /// The normal equations of all points at pose `t_o_w`.
 fn accumulate(
     sdf: &SdfGrid,
@@ -305,14 +360,7 @@ fn accumulate(
                     acc.cost += outlier_cost;
                     continue;
                 }
-                let n = s.gradient;
-                // eq 10: J = ∇ᵀ [I | −[p_o]×] = (∇, p_o × ∇).
-                let rot = p_o.coords.cross(&n);
-                let j = [n.x, n.y, n.z, rot.x, rot.y, rot.z];
-                // eq 11: G = ∇ᵀ R_o_w ∂p_w/∂z.
-                let gz = n.dot(&(rot_o_w * point.dp_dz_w));
-                let var = gz * gz * point.sigma_z_m * point.sigma_z_m + model_var;
-                let inv_var = var.recip();
+                let (j, inv_var) = point_terms(&s.gradient, &p_o, point, &rot_o_w, model_var);
                 let e = r * inv_var.sqrt();
                 let (rho, weight) = huber(e, config.huber_k);
                 let w = weight * inv_var;
@@ -548,7 +596,7 @@ mod tests {
     use super::*;
     use glint_geometry::Part;
     use glint_geometry::sdf::SdfConfig;
-    use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
+    use nalgebra::{Translation3, UnitQuaternion};
     use rand::{Rng, SeedableRng};
     use rand_distr::StandardNormal;
 
@@ -665,6 +713,42 @@ mod tests {
         assert!(error.rotation.angle().to_degrees() < 0.05, "{error:?}");
         assert_eq!(result.status, RefineStatus::Converged, "{result:?}");
         assert!(result.covariance.is_some());
+    }
+
+    #[test]
+    fn predicted_information_is_the_refiners_at_the_truth() {
+        // Points exactly on the surface: every one is an inlier of the refinement started at
+        // the truth, which stays there, so its information (eq 18) is the prediction's
+        // (eq 21–22) up to the few-µm step the trilinear grid allows.
+        let part = Part::Zigzag;
+        let sdf = SdfGrid::build(&part.mesh(), &SdfConfig::default()).unwrap();
+        let t_w_o = pose([0.01, 0.02, 0.03], Vector3::new(1.0, 0.2, -0.4), 25.0);
+        let eye = Point3::new(0.05, 0.0, 0.5);
+        // Noise-free positions with a stated σ_z: a prediction's points.
+        let points: Vec<DepthPoint> = scan(&sdf, part, &t_w_o, &eye, 0.0, Noise::AlongRay, 3)
+            .into_iter()
+            .map(|p| DepthPoint {
+                sigma_z_m: 0.4e-3,
+                ..p
+            })
+            .collect();
+        let config = SdfRefineConfig::default();
+        let predicted =
+            information_of_points(&sdf, &points, &t_w_o.inverse(), config.model_sigma_m);
+        let refined = refine_sdf(&sdf, &points, &t_w_o.inverse(), &config).unwrap();
+        assert_eq!(refined.inliers, points.len());
+        let relative = (predicted - refined.information).norm() / predicted.norm();
+        assert!(relative < 1e-2, "relative difference {relative}");
+        // σ_z = 0 weighs by σ_model only: more information than with σ_z.
+        let sharp: Vec<DepthPoint> = points
+            .iter()
+            .map(|p| DepthPoint {
+                sigma_z_m: 1e-9,
+                ..*p
+            })
+            .collect();
+        let sharper = information_of_points(&sdf, &sharp, &t_w_o.inverse(), config.model_sigma_m);
+        assert!(sharper.trace() > predicted.trace());
     }
 
     /// Over noisy scans, the spread of the refined poses matches the predicted covariance:

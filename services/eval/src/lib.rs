@@ -12,6 +12,7 @@
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
 
+pub mod active;
 pub mod metrics;
 pub mod progress;
 pub mod scenes;

@@ -44,6 +44,17 @@ impl<T: Copy> Image<T> {
         })
     }
 
+    /// An image over `data` whose length the caller made `width × height` with both non-zero
+    /// (e.g. from validated intrinsics).
+    pub(crate) fn from_parts(width: u32, height: u32, data: Vec<T>) -> Self {
+        debug_assert!(width > 0 && height > 0 && data.len() == width as usize * height as usize);
+        Self {
+            width,
+            height,
+            data,
+        }
+    }
+
     /// An image with every pixel `value`.
     pub fn filled(width: u32, height: u32, value: T) -> Result<Self, ImageError> {
         Self::new(width, height, vec![value; width as usize * height as usize])

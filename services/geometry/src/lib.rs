@@ -20,6 +20,7 @@ pub mod pose_deviation;
 pub mod sampling;
 pub mod sdf;
 pub mod se3;
+pub mod silhouette;
 pub mod symmetry;
 
 pub use mesh::{LengthUnit, MeshError, MeshReport, TriMesh};

@@ -252,6 +252,32 @@ impl TriMesh {
         )
     }
 
+    /// SHA-256 of the mesh's canonical encoding, lowercase hex: the vertex and triangle
+    /// counts (u64 little-endian), every vertex's x, y, z (f32 LE), every triangle's indices
+    /// (u32 LE). Equal meshes hash equal whatever file they came from: the key under which
+    /// stages cache a part.
+    pub fn content_sha256_hex(&self) -> String {
+        use sha2::{Digest, Sha256};
+        let mut hasher = Sha256::new();
+        hasher.update((self.vertices.len() as u64).to_le_bytes());
+        hasher.update((self.triangles.len() as u64).to_le_bytes());
+        for v in &self.vertices {
+            for c in [v.x, v.y, v.z] {
+                hasher.update(c.to_le_bytes());
+            }
+        }
+        for t in &self.triangles {
+            for i in t {
+                hasher.update(i.to_le_bytes());
+            }
+        }
+        hasher
+            .finalize()
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    }
+
     /// The corners of triangle `i`.
     #[inline]
     pub fn triangle(&self, i: usize) -> [Point3<f32>; 3] {

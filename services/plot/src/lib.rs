@@ -79,3 +79,54 @@ pub fn padded_range(values: impl Iterator<Item = f64>, pad: f64) -> (f64, f64) {
     let span = (hi - lo).max(1e-9);
     (lo - pad * span, hi + pad * span)
 }
+
+/// A colour for `t` in [0, 1] (clamped) on a perceptually ordered dark-blue → yellow ramp
+/// (viridis' end points and three stops between, linearly interpolated).
+pub fn ramp_rgb(t: f64) -> [u8; 3] {
+    const STOPS: [[f64; 3]; 5] = [
+        [68.0, 1.0, 84.0],
+        [59.0, 82.0, 139.0],
+        [33.0, 145.0, 140.0],
+        [94.0, 201.0, 98.0],
+        [253.0, 231.0, 37.0],
+    ];
+    let x = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    } * (STOPS.len() - 1) as f64;
+    let i = (x.floor() as usize).min(STOPS.len() - 2);
+    let f = x - i as f64;
+    let mix = |c: usize| (STOPS[i][c] * (1.0 - f) + STOPS[i + 1][c] * f).round() as u8;
+    [mix(0), mix(1), mix(2)]
+}
+
+/// A scalar image (row-major, `width × height` values) as a colour-mapped PNG: `lo..=hi` on
+/// [`ramp_rgb`], non-finite values (missing) in `missing_rgb`.
+pub fn scalar_image_png(
+    values: &[f32],
+    width: u32,
+    height: u32,
+    lo: f64,
+    hi: f64,
+    missing_rgb: [u8; 3],
+) -> Result<Vec<u8>, PlotError> {
+    let span = (hi - lo).max(f64::MIN_POSITIVE);
+    let rgb: Vec<u8> = values
+        .iter()
+        .flat_map(|&v| {
+            if v.is_finite() {
+                ramp_rgb((f64::from(v) - lo) / span)
+            } else {
+                missing_rgb
+            }
+        })
+        .collect();
+    if rgb.len() != (width as usize) * (height as usize) * 3 {
+        return Err(PlotError::Encode(format!(
+            "{} values for a {width}×{height} image",
+            values.len()
+        )));
+    }
+    encode_rgb_png(&rgb, width, height)
+}

@@ -1,0 +1,326 @@
+//! An active session on a mock bin, as the demo and the end-to-end tests run it: the bin
+//! set-up, the target instance, a stand-in detector's initial pose, and each step's pose error
+//! against the truth. Evaluation code: it reads ground truth to place the detector's guess and
+//! to score the steps; the session itself (in `glint-orchestrator`) never sees it.
+
+use std::sync::Arc;
+
+use anyhow::Context;
+use glint_camera::setup::{BinSetup, BinSetupSpec};
+use glint_camera::visibility::instance_visibility;
+use glint_geometry::pose_deviation::{PoseDeviation, pose_deviation};
+use glint_geometry::{Part, Symmetry};
+use glint_orchestrator::local::MockCamera;
+use glint_orchestrator::session::StepRecord;
+use glint_orchestrator::stages::SessionObject;
+use nalgebra::Isometry3;
+use rand::SeedableRng;
+
+use crate::metrics::InitialPoseNoise;
+
+/// How the demo's bin is made.
+#[derive(Clone, Debug)]
+pub struct ActiveSceneSpec {
+    pub part: Part,
+    pub instances: u32,
+    /// Seed of the drop and of the detector's error.
+    pub seed: u64,
+    pub width_px: u32,
+    pub height_px: u32,
+    /// Samples per pixel of the mock camera's renders.
+    pub samples_per_pixel: u32,
+    /// Candidate views on the cap above the bin.
+    pub candidates: usize,
+}
+
+/// The bin, the part to refine and the stand-in detector's guess.
+pub struct ActiveScene {
+    pub camera: MockCamera,
+    pub object: SessionObject,
+    pub symmetry: Symmetry,
+    pub candidates: Vec<Isometry3<f64>>,
+    /// The candidate the detector looked from (the session's first view).
+    pub first_view: usize,
+    /// Index of the target among the bin's instances: the most visible one from the first view.
+    pub target: usize,
+    /// Ground truth of the target, evaluation only.
+    pub gt_t_w_o: Isometry3<f64>,
+    /// The stand-in detector's pose: the truth perturbed as `glint eval refine` perturbs it
+    /// ([`InitialPoseNoise`], within 30 mm/30°).
+    pub initial_t_w_o: Isometry3<f64>,
+    /// Share of the target's silhouette visible from the first view.
+    pub target_visib_fract: f64,
+}
+
+/// Drops the bin, picks the target and draws the detector's guess.
+pub fn set_up(spec: &ActiveSceneSpec) -> anyhow::Result<ActiveScene> {
+    let mesh = spec.part.mesh();
+    let setup = BinSetup::new(
+        &mesh,
+        glint_camera::materials::ground_truth(spec.part),
+        &BinSetupSpec {
+            instances: spec.instances,
+            seed: spec.seed,
+            width_px: spec.width_px,
+            height_px: spec.height_px,
+            samples_per_pixel: spec.samples_per_pixel,
+        },
+    )
+    .context("setting up the mock bin")?;
+    anyhow::ensure!(spec.candidates >= 2, "candidates: at least 2 views");
+    let candidates = setup.views(spec.candidates);
+    let first_view = 0;
+    let [left, _] = setup.rig.cameras(&candidates[first_view]);
+    let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
+    let visibility = instance_visibility(&setup.scene, &left, &labels);
+    let (target, target_visib_fract) = visibility
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (i, v.visib_fract * v.px_count_all as f64, v.visib_fract))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _, f)| (i, f))
+        .context("the bin holds no instance")?;
+    let gt_t_w_o = setup.poses[target];
+    let symmetry = spec.part.symmetry();
+    // The detector's error lives in its camera's frame (lateral vs depth).
+    let t_w_c = candidates[first_view];
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(spec.seed ^ 0xDE7E_C70B);
+    let t_c_o =
+        InitialPoseNoise::default().draw(&(t_w_c.inverse() * gt_t_w_o), &symmetry, &mut rng);
+    let initial_t_w_o = t_w_c * t_c_o;
+    let object = SessionObject {
+        name: spec.part.name().to_string(),
+        mesh_sha256_hex: mesh.content_sha256_hex(),
+        mesh: Arc::new(mesh),
+    };
+    Ok(ActiveScene {
+        camera: MockCamera { setup },
+        object,
+        symmetry,
+        candidates,
+        first_view,
+        target,
+        gt_t_w_o,
+        initial_t_w_o,
+        target_visib_fract,
+    })
+}
+
+impl ActiveScene {
+    /// The bin's floor (world z = 0, parts above) as the cell's calibration knows it, with
+    /// `clearance_m`.
+    pub fn background(&self, clearance_m: f64) -> glint_estimation::view::BackgroundPlane {
+        glint_estimation::view::BackgroundPlane {
+            normal_w: nalgebra::Vector3::z_axis(),
+            offset_m: 0.0,
+            clearance_m,
+        }
+    }
+}
+
+/// Each step's pose error against the truth (symmetry-aware), the initial guess first.
+pub fn deviations(
+    scene: &ActiveScene,
+    steps: &[StepRecord],
+) -> (PoseDeviation, Vec<PoseDeviation>) {
+    let of = |t_w_o: &Isometry3<f64>| pose_deviation(t_w_o, &scene.gt_t_w_o, &scene.symmetry);
+    (
+        of(&scene.initial_t_w_o),
+        steps.iter().map(|s| of(&s.t_w_o)).collect(),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glint_estimation::view::{SigmaSource, ViewMeasurement, hypothesis_mask, view_points};
+    use glint_geometry::image::DepthMap;
+    use glint_orchestrator::local::LocalEstimation;
+    use glint_orchestrator::session::{
+        self, Session, SessionConfig, SessionState, Stages, ViewPolicy,
+    };
+    use glint_orchestrator::stages::{CameraStage, RefineSettings, RefineSigma, StageError};
+
+    /// Median |SDF| (m) of `view`'s points in the silhouette of the truth.
+    fn median_sdf_at_truth(scene: &ActiveScene, view: &ViewMeasurement) -> (usize, f64) {
+        let mask = hypothesis_mask(
+            &scene.object.mesh,
+            &view.stereo,
+            &view.t_w_c,
+            &scene.gt_t_w_o,
+            0.0,
+        );
+        let sigma = SigmaSource::Constant { sigma_z_m: 1e-3 };
+        let points = view_points(view, &mask, &sigma, 0).unwrap().points;
+        let sdf =
+            glint_geometry::sdf::SdfGrid::build(&scene.object.mesh, &Default::default()).unwrap();
+        let t_o_w = scene.gt_t_w_o.inverse();
+        let mut d: Vec<f64> = points
+            .iter()
+            .map(|p| sdf.sample(&(t_o_w * p.p_w)).distance_m.abs())
+            .collect();
+        d.sort_by(f64::total_cmp);
+        (d.len(), d[d.len() / 2])
+    }
+
+    #[test]
+    fn the_silhouette_of_the_truth_selects_the_parts_depth() {
+        let scene = set_up(&ActiveSceneSpec {
+            part: Part::Zigzag,
+            instances: 4,
+            seed: 3,
+            width_px: 320,
+            height_px: 256,
+            samples_per_pixel: 1,
+            candidates: 6,
+        })
+        .unwrap();
+        let t_w_c = scene.candidates[scene.first_view];
+        let view = scene.camera.capture(&t_w_c, 7).unwrap().measurement;
+        // The renderer's true depth through the silhouette lies on the mesh up to the 1 mm
+        // SDF grid's trilinear error (a quarter voxel): the silhouette, the back-projection and
+        // the frames agree with the renderer's.
+        let rendered = scene.camera.setup.camera().render_shots(&t_w_c, 7);
+        let truth = ViewMeasurement {
+            depth: DepthMap::new(rendered.truth.depth_m),
+            ..view.clone()
+        };
+        let (n, median) = median_sdf_at_truth(&scene, &truth);
+        assert!(
+            n > 30 && median < 0.25e-3,
+            "{n} points, median |SDF| {median} m"
+        );
+        // The camera's matched depth there: the Zigzag's matte-ish strip matches within a few
+        // σ_z (≈ 0.3 mm here), not the centimetres of a wrong frame or a mirror match.
+        let (n, median) = median_sdf_at_truth(&scene, &view);
+        assert!(
+            n > 30 && median < 1.5e-3,
+            "{n} points, median |SDF| {median} m"
+        );
+    }
+
+    fn small_scene() -> ActiveScene {
+        set_up(&ActiveSceneSpec {
+            part: Part::Zigzag,
+            instances: 3,
+            seed: 5,
+            width_px: 640,
+            height_px: 512,
+            samples_per_pixel: 1,
+            candidates: 8,
+        })
+        .unwrap()
+    }
+
+    fn config(scene: &ActiveScene, policy: ViewPolicy, max_views: usize) -> SessionConfig {
+        SessionConfig {
+            initial_t_w_o: scene.initial_t_w_o,
+            candidates: scene.candidates.clone(),
+            first_view: scene.first_view,
+            policy,
+            max_views,
+            entropy_threshold_nats: None,
+            seed: 9,
+            refine: RefineSettings {
+                mask_margin_m: 10e-3,
+                final_mask_margin_m: Some(3e-3),
+                background: Some(scene.background(2e-3)),
+                erode_px: 1,
+                window_radius_px: 1,
+                sigma: RefineSigma::PatternImages,
+            },
+            const_sigma_z_m: 0.5e-3,
+        }
+    }
+
+    #[test]
+    fn a_session_takes_distinct_views_until_its_budget_and_resumes_identically() {
+        let scene = small_scene();
+        let estimation = LocalEstimation::default();
+        let stages = Stages {
+            camera: &scene.camera,
+            estimation: &estimation,
+            prediction: None,
+        };
+        let mut session =
+            Session::new("t".into(), config(&scene, ViewPolicy::MaxDistance, 3)).unwrap();
+        let mut seen = Vec::new();
+        session::run(
+            &mut session,
+            &scene.object,
+            &stages,
+            |s| seen.push(s.step),
+            || false,
+        )
+        .unwrap();
+        assert_eq!(session.state, SessionState::BudgetSpent);
+        assert_eq!(seen, [0, 1, 2]);
+        let views: Vec<usize> = session.steps.iter().map(|s| s.view).collect();
+        assert_eq!(views[0], scene.first_view);
+        assert!(views[0] != views[1] && views[1] != views[2] && views[0] != views[2]);
+        for pair in session.steps.windows(2) {
+            assert_eq!(pair[0].next_view, Some(pair[1].view));
+        }
+        assert_eq!(session.steps[2].next_view, None);
+        // Points accumulate view by view.
+        let totals: Vec<usize> = session.steps.iter().map(|s| s.total_points).collect();
+        assert!(totals[0] > 0 && totals[1] > totals[0] && totals[2] > totals[1]);
+        // A session resumed after its second step (a restart that kept steps and captures)
+        // completes with the same third step: every stage is seeded by the step.
+        let mut resumed = session.clone();
+        resumed.steps.truncate(2);
+        resumed.views.truncate(2);
+        resumed.state = SessionState::Running;
+        session::run(&mut resumed, &scene.object, &stages, |_| {}, || false).unwrap();
+        assert_eq!(resumed.steps[2].view, session.steps[2].view);
+        assert_eq!(resumed.steps[2].t_w_o, session.steps[2].t_w_o);
+    }
+
+    #[test]
+    fn sessions_stop_at_the_threshold_and_refuse_what_they_cannot_run() {
+        let scene = small_scene();
+        let estimation = LocalEstimation::default();
+        let stages = Stages {
+            camera: &scene.camera,
+            estimation: &estimation,
+            prediction: None,
+        };
+        // Any pose entropy is below +10⁶ nats: one view and the session has converged.
+        let mut c = config(&scene, ViewPolicy::Random, 5);
+        c.entropy_threshold_nats = Some(1e6);
+        let mut session = Session::new("t".into(), c).unwrap();
+        session::run(&mut session, &scene.object, &stages, |_| {}, || false).unwrap();
+        assert_eq!(session.state, SessionState::Converged);
+        assert_eq!(session.steps.len(), 1);
+        // An entropy policy without render workers fails with a reason, after its first step.
+        let mut session = Session::new("t".into(), config(&scene, ViewPolicy::Nbv, 3)).unwrap();
+        let err = session::run(&mut session, &scene.object, &stages, |_| {}, || false).unwrap_err();
+        assert!(
+            matches!(err, StageError::FailedPrecondition(ref m) if m.contains("render workers"))
+        );
+        assert_eq!(session.state, SessionState::Failed);
+        // Cancelled before the first capture: nothing taken.
+        let mut session = Session::new("t".into(), config(&scene, ViewPolicy::Random, 3)).unwrap();
+        let err = session::run(&mut session, &scene.object, &stages, |_| {}, || true).unwrap_err();
+        assert_eq!(err, StageError::Cancelled);
+        assert_eq!(
+            (session.state, session.views.len()),
+            (SessionState::Cancelled, 0)
+        );
+        // Bad configurations name their field.
+        let mut c = config(&scene, ViewPolicy::Random, 0);
+        assert!(
+            matches!(Session::new("t".into(), c.clone()), Err(StageError::InvalidArgument { ref field, .. }) if field == "max_views")
+        );
+        c.max_views = 2;
+        c.first_view = 99;
+        assert!(
+            matches!(Session::new("t".into(), c.clone()), Err(StageError::InvalidArgument { ref field, .. }) if field == "first_view")
+        );
+        c.first_view = 0;
+        c.candidates[3].translation.vector.x = f64::NAN;
+        assert!(
+            matches!(Session::new("t".into(), c), Err(StageError::InvalidArgument { ref field, .. }) if field == "candidates_t_w_c[3]")
+        );
+    }
+}

@@ -1,0 +1,11 @@
+//! Glint's orchestrator: active pose-refinement sessions (paper §VI) over the pipeline's
+//! stages. [`session`] is the state machine (capture → refine → predict → choose, repeated);
+//! [`stages`] the traits it runs on; [`local`] their in-process implementations over the
+//! libraries. Nothing here reads ground truth: the mock camera's set-up holds it, and only
+//! `glint-eval` looks.
+
+#![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+
+pub mod local;
+pub mod session;
+pub mod stages;

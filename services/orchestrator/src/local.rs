@@ -1,0 +1,222 @@
+//! The stages in-process, over the libraries: the mock camera on a bin set-up, the estimator
+//! (SDF refinement and the entropy planner). The servers wrap exactly these.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use glint_camera::setup::BinSetup;
+use glint_estimation::nbv::{PosePrior, plan_next_view, pose_entropy_nats};
+use glint_estimation::refine::{SdfRefineConfig, refine_sdf};
+use glint_estimation::view::{
+    SigmaSource, ViewMeasurement, ViewPoints, hypothesis_mask, view_points,
+};
+use glint_geometry::sdf::{SdfConfig, SdfGrid};
+use nalgebra::{Isometry3, Matrix6};
+use rayon::prelude::*;
+
+use crate::stages::{
+    CameraInfo, CameraStage, CapturedView, EstimationStage, RefineSettings, RefineSigma,
+    Refinement, SessionObject, StageError, ViewPlan,
+};
+
+/// The mock structured-light camera looking at a bin of parts.
+pub struct MockCamera {
+    pub setup: BinSetup,
+}
+
+impl CameraStage for MockCamera {
+    fn info(&self) -> Result<CameraInfo, StageError> {
+        let config = &self.setup.config;
+        Ok(CameraInfo {
+            stereo: self.setup.rig.stereo,
+            rig: self.setup.rig,
+            max_dn: config.sensor.max_dn(),
+            shots: config.shots,
+            window_radius_px: config.matcher.window_radius_px,
+        })
+    }
+
+    fn capture(&self, t_w_c: &Isometry3<f64>, seed: u64) -> Result<CapturedView, StageError> {
+        let started = Instant::now();
+        let camera = self.setup.camera();
+        let rendered = camera.render_shots(t_w_c, seed);
+        let (capture, _truth) = camera
+            .capture_rendered(t_w_c, &rendered, seed)
+            .map_err(|e| StageError::Internal(format!("capture: {e}")))?;
+        let noise_shots = camera.noise_shots(&rendered, seed);
+        let left = capture.shot_images(0).into_iter().cloned().collect();
+        let right = capture.shot_images(1).into_iter().cloned().collect();
+        Ok(CapturedView {
+            measurement: ViewMeasurement {
+                t_w_c: *t_w_c,
+                stereo: self.setup.rig.stereo,
+                depth: capture.depth,
+                left,
+                right,
+                noise_shots,
+                max_dn: camera.config.sensor.max_dn(),
+            },
+            capture_ms: started.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+}
+
+/// The estimator in-process: SDF grids built once per mesh (by its hash).
+pub struct LocalEstimation {
+    pub refine: SdfRefineConfig,
+    pub sdf: SdfConfig,
+    pub prior: PosePrior,
+    grids: Mutex<HashMap<String, Arc<SdfGrid>>>,
+}
+
+impl Default for LocalEstimation {
+    fn default() -> Self {
+        Self {
+            refine: SdfRefineConfig::default(),
+            sdf: SdfConfig {
+                voxel_size_m: glint_estimation::refine::REFINE_SDF_VOXEL_MM * 1e-3,
+                ..SdfConfig::default()
+            },
+            prior: PosePrior::default(),
+            grids: Mutex::new(HashMap::new()),
+        }
+    }
+}
+
+impl LocalEstimation {
+    /// The SDF grid of `object`, built on first use.
+    pub fn grid(&self, object: &SessionObject) -> Result<Arc<SdfGrid>, StageError> {
+        let poisoned = |_| StageError::Internal("the SDF cache's lock was poisoned".into());
+        if let Some(grid) = self
+            .grids
+            .lock()
+            .map_err(poisoned)?
+            .get(&object.mesh_sha256_hex)
+        {
+            return Ok(grid.clone());
+        }
+        let grid = Arc::new(
+            SdfGrid::build(&object.mesh, &self.sdf)
+                .map_err(|e| StageError::invalid("mesh", format!("SDF grid: {e}")))?,
+        );
+        self.grids
+            .lock()
+            .map_err(poisoned)?
+            .insert(object.mesh_sha256_hex.clone(), grid.clone());
+        Ok(grid)
+    }
+}
+
+/// A view's part points in the silhouette of the hypothesis `t_w_o` grown by `margin_m`.
+pub fn points_of_view(
+    object: &SessionObject,
+    view: &ViewMeasurement,
+    t_w_o: &Isometry3<f64>,
+    margin_m: f64,
+    settings: &RefineSettings,
+) -> Result<ViewPoints, StageError> {
+    let mask = hypothesis_mask(&object.mesh, &view.stereo, &view.t_w_c, t_w_o, margin_m);
+    let sigma = match settings.sigma {
+        RefineSigma::PatternImages => SigmaSource::PatternImages {
+            window_radius_px: settings.window_radius_px,
+            noise: None,
+        },
+        RefineSigma::Constant { sigma_z_m } => SigmaSource::Constant { sigma_z_m },
+    };
+    view_points(view, &mask, &sigma, settings.erode_px).map_err(|e| match e {
+        glint_estimation::view::ViewError::Input { field, message } => {
+            StageError::invalid(field, message)
+        }
+        other => StageError::FailedPrecondition(other.to_string()),
+    })
+}
+
+impl EstimationStage for LocalEstimation {
+    fn refine(
+        &self,
+        object: &SessionObject,
+        views: &[&CapturedView],
+        t_w_o: &Isometry3<f64>,
+        settings: &RefineSettings,
+    ) -> Result<Refinement, StageError> {
+        let started = Instant::now();
+        let grid = self.grid(object)?;
+        let points_at = |t_w_o: &Isometry3<f64>, margin_m: f64| {
+            let per_view: Vec<ViewPoints> = views
+                .par_iter()
+                .map(|v| {
+                    let mut points =
+                        points_of_view(object, &v.measurement, t_w_o, margin_m, settings)?;
+                    if let Some(background) = &settings.background {
+                        points.drop_background(background);
+                    }
+                    Ok(points)
+                })
+                .collect::<Result<_, StageError>>()?;
+            let counts: Vec<usize> = per_view.iter().map(|v| v.points.len()).collect();
+            let points: Vec<_> = per_view.into_iter().flat_map(|v| v.points).collect();
+            Ok::<_, StageError>((points, counts))
+        };
+        let refine = |points: &[_], t_w_o: &Isometry3<f64>| {
+            refine_sdf(&grid, points, &t_w_o.inverse(), &self.refine)
+                .map_err(|e| StageError::FailedPrecondition(format!("refinement: {e}")))
+        };
+        let (points, mut view_points) = points_at(t_w_o, settings.mask_margin_m)?;
+        let mut result = refine(&points, t_w_o)?;
+        if let Some(margin_m) = settings.final_mask_margin_m
+            && result.status != glint_estimation::refine::RefineStatus::Diverged
+        {
+            let first = result.t_o_w.inverse();
+            let (points, counts) = points_at(&first, margin_m)?;
+            result = refine(&points, &first)?;
+            view_points = counts;
+        }
+        let status = match result.status {
+            glint_estimation::refine::RefineStatus::Converged => "converged",
+            glint_estimation::refine::RefineStatus::MaxIterations => "max_iterations",
+            glint_estimation::refine::RefineStatus::Diverged => "diverged",
+        };
+        // A diverged pose is not an estimate: keep the hypothesis, claim no information.
+        let diverged = result.status == glint_estimation::refine::RefineStatus::Diverged;
+        let (t_w_o_refined, information, covariance) = if diverged {
+            (*t_w_o, Matrix6::zeros(), None)
+        } else {
+            (
+                result.t_o_w.inverse(),
+                result.information,
+                result.covariance,
+            )
+        };
+        Ok(Refinement {
+            t_w_o: t_w_o_refined,
+            information,
+            covariance,
+            view_points,
+            inliers: result.inliers,
+            iterations: result.iterations,
+            status: status.to_string(),
+            final_cost: result.final_cost,
+            refine_ms: started.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+
+    fn plan(
+        &self,
+        collected: &Matrix6<f64>,
+        candidates: &[Matrix6<f64>],
+        taken: &[usize],
+    ) -> Result<ViewPlan, StageError> {
+        let plan = plan_next_view(collected, candidates, taken, &self.prior)
+            .map_err(|e| StageError::invalid("candidates", e.to_string()))?;
+        Ok(ViewPlan {
+            chosen: plan.chosen,
+            entropies_nats: plan.entropies_nats,
+        })
+    }
+
+    fn entropy_nats(&self, information: &Matrix6<f64>) -> Result<f64, StageError> {
+        pose_entropy_nats(information, &self.prior)
+            .map_err(|e| StageError::invalid("information", e.to_string()))
+    }
+}

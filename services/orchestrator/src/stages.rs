@@ -1,0 +1,234 @@
+//! The stages a session drives, as traits: the camera, the estimator (refine and plan) and the
+//! render workers (candidate prediction). Each has an in-process implementation over the
+//! libraries ([`crate::local`]); gRPC ones come with the servers, so the demo and a deployment
+//! will run the same session code.
+//!
+//! Frames: `t_w_c` left camera → world, `t_w_o` object → world. Information matrices are over
+//! the left perturbation of `t_o_w`, translation first (as `glint_estimation::refine`).
+
+use std::sync::Arc;
+
+use glint_estimation::view::ViewMeasurement;
+use glint_geometry::TriMesh;
+use glint_geometry::camera::StereoRig;
+use glint_geometry::image::Image;
+use nalgebra::{Isometry3, Matrix6};
+
+/// Why a stage could not do what a session asked. The variants are what a caller acts on
+/// differently (and what gRPC codes map to).
+#[derive(Clone, Debug, thiserror::Error, PartialEq)]
+pub enum StageError {
+    /// The request is wrong: fix `field`.
+    #[error("{field}: {message}")]
+    InvalidArgument { field: String, message: String },
+    /// The stage lacks something it must be given first (e.g. an object by its hash).
+    #[error("not found: {0}")]
+    NotFound(String),
+    /// The request is valid but the data cannot give an answer (e.g. too few points).
+    #[error("{0}")]
+    FailedPrecondition(String),
+    /// The stage could not be reached or did not answer in time; another replica may.
+    #[error("unavailable: {0}")]
+    Unavailable(String),
+    /// The session was cancelled.
+    #[error("cancelled")]
+    Cancelled,
+    /// Anything else.
+    #[error("{0}")]
+    Internal(String),
+}
+
+impl StageError {
+    pub fn invalid(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::InvalidArgument {
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+}
+
+/// The part a session refines: what a real system knows of it.
+#[derive(Clone, Debug)]
+pub struct SessionObject {
+    /// A name for logs and reports.
+    pub name: String,
+    /// The mesh, metres, in the object's frame.
+    pub mesh: Arc<TriMesh>,
+    /// SHA-256 of the mesh (lowercase hex): its key in every stage's cache.
+    pub mesh_sha256_hex: String,
+}
+
+/// What a camera tells about itself.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraInfo {
+    /// The left camera's rectified rig.
+    pub stereo: StereoRig,
+    /// The full rig (cameras and projector), for prediction.
+    pub rig: glint_render::rig::SliRig,
+    /// Full scale of the read-out's digital numbers.
+    pub max_dn: u16,
+    /// Pattern shots per capture.
+    pub shots: u32,
+    /// The stereo matcher's window radius, px.
+    pub window_radius_px: u32,
+}
+
+/// A capture as the session receives it.
+#[derive(Clone, Debug)]
+pub struct CapturedView {
+    pub measurement: ViewMeasurement,
+    /// Time the camera took, milliseconds.
+    pub capture_ms: f64,
+}
+
+/// The structured-light camera (mock or real).
+pub trait CameraStage: Send + Sync {
+    fn info(&self) -> Result<CameraInfo, StageError>;
+    /// A capture from left-camera pose `t_w_c`, with two noise shots for σ_I. `seed` drives a
+    /// simulator's noise (a real camera ignores it).
+    fn capture(&self, t_w_c: &Isometry3<f64>, seed: u64) -> Result<CapturedView, StageError>;
+}
+
+/// Which depth σ a refinement weighs points with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RefineSigma {
+    /// From each view's pattern images (eq 1–5), the paper's method.
+    PatternImages,
+    /// The same σ_z for every point, metres (an unweighted refinement).
+    Constant { sigma_z_m: f64 },
+}
+
+/// How the estimator finds the part's pixels and weighs them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RefineSettings {
+    /// The hypothesis silhouette grows by this, metres at the part's depth, to hold the part
+    /// when the hypothesis is off.
+    pub mask_margin_m: f64,
+    /// A second pass re-masks at the first pass's pose with this margin (metres) and refines
+    /// again, so the wide first mask's neighbours stop pulling; `None`: one pass.
+    pub final_mask_margin_m: Option<f64>,
+    /// A known plane that is not the part (the bin's floor): its points are dropped.
+    pub background: Option<glint_estimation::view::BackgroundPlane>,
+    /// Mask erosion before taking points, px (stereo windows straddling the silhouette).
+    pub erode_px: u32,
+    /// The matcher's window radius, px (eq 2–3 sum over it).
+    pub window_radius_px: u32,
+    pub sigma: RefineSigma,
+}
+
+/// What a refinement over all views so far gives.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Refinement {
+    pub t_w_o: Isometry3<f64>,
+    /// Fisher information of the pose (eq 18) and its inverse (eq 19; `None` when singular).
+    pub information: Matrix6<f64>,
+    pub covariance: Option<Matrix6<f64>>,
+    /// Depth points of the part per view, in view order.
+    pub view_points: Vec<usize>,
+    pub inliers: usize,
+    pub iterations: usize,
+    /// "converged", "max_iterations" or "diverged".
+    pub status: String,
+    pub final_cost: f64,
+    /// Time the refinement took, milliseconds.
+    pub refine_ms: f64,
+}
+
+/// The planner's answer (eq 23).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewPlan {
+    /// Index into the candidates given.
+    pub chosen: usize,
+    /// Predicted entropy of each candidate, nats; `None` for taken views.
+    pub entropies_nats: Vec<Option<f64>>,
+}
+
+/// Pose estimation: refinement and the next-view choice.
+pub trait EstimationStage: Send + Sync {
+    /// Refines the part's pose on `views` from the hypothesis `t_w_o`, whose silhouette is the
+    /// part's mask in every view.
+    fn refine(
+        &self,
+        object: &SessionObject,
+        views: &[&CapturedView],
+        t_w_o: &Isometry3<f64>,
+        settings: &RefineSettings,
+    ) -> Result<Refinement, StageError>;
+
+    /// The candidate whose predicted information, added to `collected`, gives the least pose
+    /// entropy; `taken` candidates are not chosen again.
+    fn plan(
+        &self,
+        collected: &Matrix6<f64>,
+        candidates: &[Matrix6<f64>],
+        taken: &[usize],
+    ) -> Result<ViewPlan, StageError>;
+
+    /// Entropy of a pose with information `information` (the planner's prior included), nats.
+    fn entropy_nats(&self, information: &Matrix6<f64>) -> Result<f64, StageError>;
+}
+
+/// One candidate's predicted contribution.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CandidateInformation {
+    /// Index into the session's candidates.
+    pub index: u32,
+    /// The Fisher information this view would add (eq 18, 21–22).
+    pub information: Matrix6<f64>,
+    pub part_pixels: u32,
+    pub predicted_points: u32,
+    pub missing_ratio: u32,
+    pub missing_sigma: u32,
+    pub not_in_view: bool,
+    /// The predicted σ_z map over the region of interest and its top-left pixel, when asked.
+    pub sigma_z_m: Option<(Image<f32>, u32, u32)>,
+    pub predict_ms: f64,
+}
+
+/// How a prediction models depth uncertainty.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PredictionSigma {
+    /// Rendering-based σ̌_z and missing pixels (eq 14–17), the paper's method.
+    Rendered,
+    /// A constant σ_z, metres, on every visible part pixel (the constant-σ baseline).
+    Constant { sigma_z_m: f64 },
+}
+
+/// What the render workers are asked for one decision.
+#[derive(Clone, Debug)]
+pub struct PredictionRequest {
+    /// The hypothesis, object → world.
+    pub t_w_o: Isometry3<f64>,
+    /// `(index into the session's candidates, left camera → world)`.
+    pub candidates: Vec<(u32, Isometry3<f64>)>,
+    pub sigma: PredictionSigma,
+    /// Seed of the renders; each candidate's is derived from it and its index, so any
+    /// worker gives the same answer.
+    pub seed: u64,
+    /// Return the σ̌_z maps too.
+    pub with_maps: bool,
+}
+
+/// What a render worker must know of the part and the hardware to predict a view: never the
+/// simulator's truth, only what calibration measured.
+#[derive(Clone, Debug)]
+pub struct PredictionObject {
+    pub object: SessionObject,
+    /// The fitted material (`glint calibrate bsdf`).
+    pub material: glint_render::bsdf::PrincipledParams<f32>,
+    /// The calibrated camera response (`glint calibrate response`).
+    pub response: glint_calibration::response::ResponseTable,
+    pub rig: glint_render::rig::SliRig,
+    /// The sensor's noise, fitted from a view's noise shots.
+    pub noise: glint_estimation::depth_sigma::NoiseModel,
+}
+
+/// The render workers: candidate-view prediction. Stateless towards the caller: every call
+/// names its object, which an implementation may cache by content hash.
+pub trait PredictionStage: Send + Sync {
+    fn predict(
+        &self,
+        object: &PredictionObject,
+        request: &PredictionRequest,
+    ) -> Result<Vec<CandidateInformation>, StageError>;
+}
