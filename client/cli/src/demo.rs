@@ -9,13 +9,15 @@ use std::time::Instant;
 
 use anyhow::Context;
 use glint_camera::record::to_8bit;
-use glint_eval::active::{ActiveScene, ActiveSceneSpec, deviations, set_up};
+use glint_eval::active::{
+    ActiveScene, ActiveSceneSpec, CONST_SIGMA_Z_M, Calibration, Masking, deviations,
+    prediction_object, session_config, set_up,
+};
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::parts::Part;
 use glint_geometry::pose_deviation::PoseDeviation;
-use glint_orchestrator::local::LocalEstimation;
-use glint_orchestrator::session::{self, Session, SessionConfig, Stages, StepRecord, ViewPolicy};
-use glint_orchestrator::stages::{CameraStage, RefineSettings, RefineSigma};
+use glint_orchestrator::local::{LocalEstimation, LocalPrediction};
+use glint_orchestrator::session::{self, Session, Stages, StepRecord, ViewPolicy};
 
 pub const DEFAULT_OUT: &str = "glint-out";
 
@@ -28,8 +30,15 @@ pub struct DemoArgs {
     #[arg(long, default_value = "zigzag")]
     pub part: Part,
     /// How the next view is chosen: nbv, nbv-const-sigma, random, max-distance.
-    #[arg(long, default_value = "max-distance")]
+    #[arg(long, default_value = "nbv")]
     pub policy: ViewPolicy,
+    /// The part's fitted material (`glint calibrate bsdf`), for the entropy policies' render
+    /// workers; the Zigzag has one embedded (assets/calibration/zigzag).
+    #[arg(long)]
+    pub material: Option<PathBuf>,
+    /// The camera response (`glint calibrate response`) that goes with --material.
+    #[arg(long, requires = "material")]
+    pub response: Option<PathBuf>,
     /// Views at most (the first included).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub max_views: u32,
@@ -114,29 +123,23 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         candidates: args.candidates as usize,
     };
     let scene = set_up(&spec)?;
-    let info = scene.camera.info().map_err(anyhow::Error::msg)?;
     let entropy_threshold_nats = entropy_of_sigmas(
         args.stop_sigma_mm_deg * 1e-3,
         args.stop_sigma_mm_deg.to_radians(),
     );
-    let config = SessionConfig {
-        initial_t_w_o: scene.initial_t_w_o,
-        candidates: scene.candidates.clone(),
-        first_view: scene.first_view,
-        policy: args.policy,
-        max_views: args.max_views as usize,
-        entropy_threshold_nats: Some(entropy_threshold_nats),
-        seed: args.seed,
-        refine: RefineSettings {
-            mask_margin_m: args.mask_margin_mm * 1e-3,
-            final_mask_margin_m: Some(args.final_mask_margin_mm * 1e-3),
-            background: Some(scene.background(args.floor_clearance_mm * 1e-3)),
-            erode_px: info.window_radius_px,
-            window_radius_px: info.window_radius_px,
-            sigma: RefineSigma::PatternImages,
-        },
-        const_sigma_z_m: 0.5e-3,
+    let masking = Masking {
+        margin_m: args.mask_margin_mm * 1e-3,
+        final_margin_m: args.final_mask_margin_mm * 1e-3,
+        floor_clearance_m: args.floor_clearance_mm * 1e-3,
     };
+    let config = session_config(
+        &scene,
+        args.policy,
+        args.max_views as usize,
+        Some(entropy_threshold_nats),
+        args.seed,
+        &masking,
+    )?;
     let (initial, _) = deviations(&scene, &[]);
     println!(
         "Active session: {} (instance {} in a bin of {}), {} candidate views, policy {}, at most \
@@ -164,10 +167,33 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         args.mask_margin_mm, args.final_mask_margin_mm, args.floor_clearance_mm
     );
     let estimation = LocalEstimation::default();
+    let workers = LocalPrediction::default();
+    let prediction_object = if args.policy.prediction(CONST_SIGMA_Z_M).is_some() {
+        let calibration = match (&args.material, &args.response) {
+            (Some(m), Some(r)) => Calibration::load(m, r)?,
+            _ => Calibration::embedded(args.part).with_context(|| {
+                format!(
+                    "policy {} renders the part with its calibrated material: only the Zigzag's \
+                     is embedded; pass --material and --response (glint calibrate bsdf and \
+                     response) for the {}",
+                    args.policy.name(),
+                    args.part.display_name()
+                )
+            })??,
+        };
+        Some(prediction_object(&scene, &calibration)?)
+    } else {
+        None
+    };
     let stages = Stages {
         camera: &scene.camera,
         estimation: &estimation,
-        prediction: None,
+        prediction: prediction_object.as_ref().map(|o| {
+            (
+                &workers as &dyn glint_orchestrator::stages::PredictionStage,
+                o,
+            )
+        }),
     };
     let mut session = Session::new("demo".into(), config).map_err(anyhow::Error::msg)?;
     let bar = glint_eval::progress::bar(args.max_views as u64, "views");
@@ -205,14 +231,24 @@ fn nats_or_dash(h: Option<f64>) -> String {
 
 fn table_header() -> String {
     format!(
-        "{:>4} {:>5} {:>7} {:>8} {:>10} {:>10} {:>8} {:>7}  {}",
-        "step", "view", "points", "total", "h_pred", "h", "err_mm", "err_deg", "refine"
+        "{:>4} {:>5} {:>7} {:>8} {:>10} {:>10} {:>8} {:>7} {:>9} {:>9}  {}",
+        "step",
+        "view",
+        "points",
+        "total",
+        "h_pred",
+        "h",
+        "err_mm",
+        "err_deg",
+        "capture_s",
+        "predict_s",
+        "refine"
     )
 }
 
 fn table_row(step: &StepRecord, deviation: &PoseDeviation) -> String {
     format!(
-        "{:>4} {:>5} {:>7} {:>8} {:>10} {:>10.2} {:>8.2} {:>7.2}  {}",
+        "{:>4} {:>5} {:>7} {:>8} {:>10} {:>10.2} {:>8.2} {:>7.2} {:>9.2} {:>9.2}  {}",
         step.step,
         step.view,
         step.view_points,
@@ -221,6 +257,8 @@ fn table_row(step: &StepRecord, deviation: &PoseDeviation) -> String {
         step.entropy_nats,
         deviation.translation_mm(),
         deviation.rotation_deg(),
+        step.times.capture_ms * 1e-3,
+        step.times.predict_ms * 1e-3,
         step.refine_status
     )
 }

@@ -68,7 +68,21 @@ impl MaterialFile {
 
     /// Reads and validates `path`: the format, every parameter present and in range.
     pub fn load(path: &Path) -> Result<Self, MaterialFileError> {
-        let file: Self = read_json(path)?;
+        let text = std::fs::read_to_string(path).map_err(|source| MaterialFileError::Read {
+            path: path.into(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Checks and reads the JSON text of a material file; `origin` names where it came from in
+    /// errors (a file, or an embedded default).
+    pub fn parse(text: &str, origin: &Path) -> Result<Self, MaterialFileError> {
+        let path = origin;
+        let file: Self = serde_json::from_str(text).map_err(|e| MaterialFileError::Malformed {
+            path: path.into(),
+            problem: e.to_string(),
+        })?;
         if file.format != MATERIAL_FORMAT {
             return Err(MaterialFileError::Format {
                 path: path.into(),
@@ -82,6 +96,21 @@ impl MaterialFile {
     /// Writes the file atomically (a reader never sees half of it).
     pub fn save(&self, path: &Path) -> Result<(), MaterialFileError> {
         write_json(path, self)
+    }
+
+    /// The fit's radiometric scale (relative radiance-map units per W·sr⁻¹·m⁻²): the median
+    /// of its views' `per_view[].radiometric_scale`, if the provenance holds any.
+    pub fn radiometric_scale(&self) -> Option<f64> {
+        let mut scales: Vec<f64> = self
+            .provenance
+            .get("per_view")?
+            .as_array()?
+            .iter()
+            .filter_map(|v| v.get("radiometric_scale")?.as_f64())
+            .filter(|s| s.is_finite() && *s > 0.0)
+            .collect();
+        scales.sort_by(f64::total_cmp);
+        scales.get(scales.len() / 2).copied()
     }
 
     /// The principled parameters, validated.
@@ -113,7 +142,21 @@ impl GroundTruthMaterials {
     }
 
     pub fn load(path: &Path) -> Result<Self, MaterialFileError> {
-        let file: Self = read_json(path)?;
+        let text = std::fs::read_to_string(path).map_err(|source| MaterialFileError::Read {
+            path: path.into(),
+            source,
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Checks and reads the JSON text of a material file; `origin` names where it came from in
+    /// errors (a file, or an embedded default).
+    pub fn parse(text: &str, origin: &Path) -> Result<Self, MaterialFileError> {
+        let path = origin;
+        let file: Self = serde_json::from_str(text).map_err(|e| MaterialFileError::Malformed {
+            path: path.into(),
+            problem: e.to_string(),
+        })?;
         validated(path, &file.part_material, "part_material")?;
         validated(path, &file.bin_material, "bin_material")?;
         Ok(file)
@@ -138,17 +181,6 @@ fn validated(
     params_from_map(map, field).map_err(|source| MaterialFileError::Params {
         path: path.into(),
         source,
-    })
-}
-
-fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, MaterialFileError> {
-    let text = std::fs::read_to_string(path).map_err(|source| MaterialFileError::Read {
-        path: path.into(),
-        source,
-    })?;
-    serde_json::from_str(&text).map_err(|e| MaterialFileError::Malformed {
-        path: path.into(),
-        problem: e.to_string(),
     })
 }
 

@@ -17,6 +17,12 @@ use nalgebra::Isometry3;
 use rand::SeedableRng;
 
 use crate::metrics::InitialPoseNoise;
+use glint_calibration::material_file::MaterialFile;
+use glint_calibration::response::ResponseTable;
+use glint_orchestrator::session::{SessionConfig, ViewPolicy};
+use glint_orchestrator::stages::{CameraStage, PredictionObject, RefineSettings, RefineSigma};
+use glint_uncertainty::CalibratedCamera;
+use std::path::Path;
 
 /// How the demo's bin is made.
 #[derive(Clone, Debug)]
@@ -118,6 +124,125 @@ impl ActiveScene {
     }
 }
 
+/// The calibration a session's render workers use: what `glint calibrate bsdf` and
+/// `glint calibrate response` wrote.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    pub material: MaterialFile,
+    pub response: ResponseTable,
+}
+
+const ZIGZAG_MATERIAL: &str = include_str!("../../../assets/calibration/zigzag/material.json");
+const ZIGZAG_RESPONSE: &str = include_str!("../../../assets/calibration/zigzag/response.json");
+
+impl Calibration {
+    pub fn load(material: &Path, response: &Path) -> anyhow::Result<Self> {
+        Ok(Self {
+            material: MaterialFile::load(material)?,
+            response: ResponseTable::load(response)?,
+        })
+    }
+
+    /// The calibration shipped with Glint for `part` (assets/calibration/, made by the commands
+    /// in its README), if there is one: today the Zigzag's.
+    pub fn embedded(part: Part) -> Option<anyhow::Result<Self>> {
+        (part == Part::Zigzag).then(|| {
+            let origin = Path::new("assets/calibration/zigzag");
+            Ok(Self {
+                material: MaterialFile::parse(ZIGZAG_MATERIAL, &origin.join("material.json"))?,
+                response: ResponseTable::parse(ZIGZAG_RESPONSE, &origin.join("response.json"))?,
+            })
+        })
+    }
+}
+
+/// What the render workers know of `scene`'s part and camera: the calibrated material,
+/// response and radiometric scale, the rig, the camera's shots and window, and the sensor's
+/// noise fitted from two read-outs of one shot at the first view (a capture of its own) —
+/// never the simulator's truth.
+pub fn prediction_object(
+    scene: &ActiveScene,
+    calibration: &Calibration,
+) -> anyhow::Result<PredictionObject> {
+    let scale = calibration.material.radiometric_scale().context(
+        "the material file's provenance has no per_view[].radiometric_scale: refit it with \
+         glint calibrate bsdf",
+    )?;
+    // The pattern captures' exposure time is a camera setting, known to the system.
+    let exposure_s = f64::from(scene.camera.setup.config.sensor.exposure_s);
+    let camera = CalibratedCamera::new(calibration.response.clone(), scale, exposure_s)?;
+    let info = scene.camera.info().map_err(anyhow::Error::msg)?;
+    let noise_capture = scene
+        .camera
+        .capture(&scene.candidates[scene.first_view], 0x4015E)
+        .map_err(anyhow::Error::msg)?;
+    Ok(PredictionObject {
+        object: scene.object.clone(),
+        material: calibration.material.params()?,
+        camera,
+        rig: info.rig,
+        noise: glint_estimation::view::noise_model_of(&noise_capture.measurement)?,
+        shots: info.shots,
+        window_radius_px: info.window_radius_px,
+    })
+}
+
+/// How the part's pixels are found in each view, as the demo and the experiments do it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Masking {
+    /// The hypothesis silhouette's margin, then the second pass's, metres.
+    pub margin_m: f64,
+    pub final_margin_m: f64,
+    /// Points this close to the bin's floor are dropped, metres.
+    pub floor_clearance_m: f64,
+}
+
+impl Default for Masking {
+    /// 10 mm (the detector's error), then 3 mm, and 2 mm above the floor.
+    fn default() -> Self {
+        Self {
+            margin_m: 10e-3,
+            final_margin_m: 3e-3,
+            floor_clearance_m: 2e-3,
+        }
+    }
+}
+
+/// A session on `scene` with `policy`: from the stand-in detector's pose, σ_z from the pattern
+/// images, the part's pixels by `masking`.
+pub fn session_config(
+    scene: &ActiveScene,
+    policy: ViewPolicy,
+    max_views: usize,
+    entropy_threshold_nats: Option<f64>,
+    seed: u64,
+    masking: &Masking,
+) -> anyhow::Result<SessionConfig> {
+    let info = scene.camera.info().map_err(anyhow::Error::msg)?;
+    Ok(SessionConfig {
+        initial_t_w_o: scene.initial_t_w_o,
+        candidates: scene.candidates.clone(),
+        first_view: scene.first_view,
+        policy,
+        max_views,
+        entropy_threshold_nats,
+        seed,
+        refine: RefineSettings {
+            mask_margin_m: masking.margin_m,
+            final_mask_margin_m: Some(masking.final_margin_m),
+            background: Some(scene.background(masking.floor_clearance_m)),
+            erode_px: info.window_radius_px,
+            window_radius_px: info.window_radius_px,
+            sigma: RefineSigma::PatternImages,
+        },
+        const_sigma_z_m: CONST_SIGMA_Z_M,
+    })
+}
+
+/// σ_z of the constant-σ policy's predictions: 0.5 mm, about the median σ_z eq 1–5 gives the
+/// default camera's depth on the parts at 0.5 m.
+pub const CONST_SIGMA_Z_M: f64 = 0.5e-3;
+
 /// Each step's pose error against the truth (symmetry-aware), the initial guess first.
 pub fn deviations(
     scene: &ActiveScene,
@@ -136,10 +261,8 @@ mod tests {
     use glint_estimation::view::{SigmaSource, ViewMeasurement, hypothesis_mask, view_points};
     use glint_geometry::image::DepthMap;
     use glint_orchestrator::local::LocalEstimation;
-    use glint_orchestrator::session::{
-        self, Session, SessionConfig, SessionState, Stages, ViewPolicy,
-    };
-    use glint_orchestrator::stages::{CameraStage, RefineSettings, RefineSigma, StageError};
+    use glint_orchestrator::session::{self, Session, SessionState, Stages};
+    use glint_orchestrator::stages::StageError;
 
     /// Median |SDF| (m) of `view`'s points in the silhouette of the truth.
     fn median_sdf_at_truth(scene: &ActiveScene, view: &ViewMeasurement) -> (usize, f64) {
@@ -213,24 +336,7 @@ mod tests {
     }
 
     fn config(scene: &ActiveScene, policy: ViewPolicy, max_views: usize) -> SessionConfig {
-        SessionConfig {
-            initial_t_w_o: scene.initial_t_w_o,
-            candidates: scene.candidates.clone(),
-            first_view: scene.first_view,
-            policy,
-            max_views,
-            entropy_threshold_nats: None,
-            seed: 9,
-            refine: RefineSettings {
-                mask_margin_m: 10e-3,
-                final_mask_margin_m: Some(3e-3),
-                background: Some(scene.background(2e-3)),
-                erode_px: 1,
-                window_radius_px: 1,
-                sigma: RefineSigma::PatternImages,
-            },
-            const_sigma_z_m: 0.5e-3,
-        }
+        session_config(scene, policy, max_views, None, 9, &Masking::default()).unwrap()
     }
 
     #[test]
@@ -322,5 +428,42 @@ mod tests {
         assert!(
             matches!(Session::new("t".into(), c), Err(StageError::InvalidArgument { ref field, .. }) if field == "candidates_t_w_c[3]")
         );
+    }
+
+    #[test]
+    fn the_nbv_policy_takes_the_candidate_of_least_predicted_entropy() {
+        use glint_orchestrator::local::LocalPrediction;
+        let scene = small_scene();
+        let calibration = Calibration::embedded(Part::Zigzag).unwrap().unwrap();
+        let object = prediction_object(&scene, &calibration).unwrap();
+        let estimation = LocalEstimation::default();
+        let workers = LocalPrediction::default();
+        let stages = Stages {
+            camera: &scene.camera,
+            estimation: &estimation,
+            prediction: Some((&workers, &object)),
+        };
+        for policy in [ViewPolicy::Nbv, ViewPolicy::NbvConstSigma] {
+            let mut session = Session::new("t".into(), config(&scene, policy, 2)).unwrap();
+            session::run(&mut session, &scene.object, &stages, |_| {}, || false).unwrap();
+            let first = &session.steps[0];
+            let h = &first.candidate_entropies_nats;
+            assert_eq!(h.len(), scene.candidates.len());
+            assert_eq!(
+                h[first.view], None,
+                "the view taken is not a candidate again"
+            );
+            let (best, best_h) = h
+                .iter()
+                .enumerate()
+                .filter_map(|(i, h)| Some((i, (*h)?)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .unwrap();
+            assert_eq!(first.next_view, Some(best), "{policy:?}: {h:?}");
+            assert_eq!(session.steps[1].view, best);
+            assert_eq!(session.steps[1].predicted_entropy_nats, Some(best_h));
+            // Every candidate's prediction adds information: entropies below the current one.
+            assert!(h.iter().flatten().all(|&x| x <= first.entropy_nats + 1e-9));
+        }
     }
 }

@@ -110,6 +110,22 @@ impl PinholeIntrinsics {
         })
     }
 
+    /// The camera that sees only the pixels of `rect` (its pixel (0, 0) is `rect`'s top-left):
+    /// the principal point shifts, the focal lengths stay. `None` when `rect` is empty or does
+    /// not fit inside the image.
+    pub fn cropped(&self, rect: &crate::image::PixelRect) -> Option<Self> {
+        if rect.is_empty() || !rect.fits_in(self.width_px, self.height_px) {
+            return None;
+        }
+        Some(Self {
+            width_px: rect.width,
+            height_px: rect.height,
+            cx_px: self.cx_px - rect.u_min as f64,
+            cy_px: self.cy_px - rect.v_min as f64,
+            ..*self
+        })
+    }
+
     /// The camera-frame point at depth `z_m` (along the optical axis) seen at continuous pixel
     /// coordinates `uv`: `z K⁻¹ (u, v, 1)ᵀ` (eq 6).
     #[inline]
@@ -180,6 +196,25 @@ impl StereoRig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_cropped_camera_sees_the_same_rays() {
+        use crate::image::{Image, PixelRect};
+        let k = PinholeIntrinsics::ensenso_n35();
+        let rect = PixelRect::new(100, 40, 300, 200);
+        let c = k.cropped(&rect).unwrap();
+        let p = Point3::new(0.01, -0.02, 0.5);
+        let (full, crop) = (k.project(&p).unwrap(), c.project(&p).unwrap());
+        assert!((full.x - crop.x - 100.0).abs() < 1e-9 && (full.y - crop.y - 40.0).abs() < 1e-9);
+        assert!(
+            k.cropped(&PixelRect::new(k.width_px - 1, 0, 2, 1))
+                .is_none()
+        );
+        let image = Image::new(4, 3, (0..12).collect::<Vec<u32>>()).unwrap();
+        let sub = image.cropped(&PixelRect::new(1, 1, 2, 2)).unwrap();
+        assert_eq!(sub.data(), &[5, 6, 9, 10]);
+        assert!(image.cropped(&PixelRect::new(3, 0, 2, 1)).is_none());
+    }
 
     #[test]
     fn project_inverts_unproject() {

@@ -107,6 +107,28 @@ impl<T: Copy> Image<T> {
         }
     }
 
+    /// The pixels of `rect` as an image of their own, or `None` when `rect` is empty or does
+    /// not fit inside this image.
+    pub fn cropped(&self, rect: &PixelRect) -> Option<Image<T>> {
+        if rect.is_empty() || !rect.fits_in(self.width, self.height) {
+            return None;
+        }
+        let w = self.width as usize;
+        let data = (rect.v_min..rect.v_min + rect.height)
+            .flat_map(|v| {
+                let start = v as usize * w + rect.u_min as usize;
+                self.data[start..start + rect.width as usize]
+                    .iter()
+                    .copied()
+            })
+            .collect();
+        Some(Image {
+            width: rect.width,
+            height: rect.height,
+            data,
+        })
+    }
+
     /// The pixel-wise `f(a, b)` of two images, or `None` when their sizes differ.
     pub fn zip_map<U: Copy, V: Copy>(
         &self,

@@ -16,8 +16,13 @@ use nalgebra::{Isometry3, Matrix6};
 use rayon::prelude::*;
 
 use crate::stages::{
-    CameraInfo, CameraStage, CapturedView, EstimationStage, RefineSettings, RefineSigma,
-    Refinement, SessionObject, StageError, ViewPlan,
+    CameraInfo, CameraStage, CandidateInformation, CapturedView, EstimationStage, PredictionObject,
+    PredictionRequest, PredictionSigma, PredictionStage, RefineSettings, RefineSigma, Refinement,
+    SessionObject, StageError, ViewPlan,
+};
+use glint_uncertainty::{
+    PredictionError, PredictionSettings, PredictorObject, SigmaModel, candidate_seed,
+    predict_candidate,
 };
 
 /// The mock structured-light camera looking at a bin of parts.
@@ -62,29 +67,25 @@ impl CameraStage for MockCamera {
     }
 }
 
-/// The estimator in-process: SDF grids built once per mesh (by its hash).
-pub struct LocalEstimation {
-    pub refine: SdfRefineConfig,
-    pub sdf: SdfConfig,
-    pub prior: PosePrior,
+/// SDF grids built once per mesh, keyed by the mesh's content hash, with the refiner's voxel.
+pub struct SdfCache {
+    pub config: SdfConfig,
     grids: Mutex<HashMap<String, Arc<SdfGrid>>>,
 }
 
-impl Default for LocalEstimation {
+impl Default for SdfCache {
     fn default() -> Self {
         Self {
-            refine: SdfRefineConfig::default(),
-            sdf: SdfConfig {
+            config: SdfConfig {
                 voxel_size_m: glint_estimation::refine::REFINE_SDF_VOXEL_MM * 1e-3,
                 ..SdfConfig::default()
             },
-            prior: PosePrior::default(),
             grids: Mutex::new(HashMap::new()),
         }
     }
 }
 
-impl LocalEstimation {
+impl SdfCache {
     /// The SDF grid of `object`, built on first use.
     pub fn grid(&self, object: &SessionObject) -> Result<Arc<SdfGrid>, StageError> {
         let poisoned = |_| StageError::Internal("the SDF cache's lock was poisoned".into());
@@ -97,7 +98,7 @@ impl LocalEstimation {
             return Ok(grid.clone());
         }
         let grid = Arc::new(
-            SdfGrid::build(&object.mesh, &self.sdf)
+            SdfGrid::build(&object.mesh, &self.config)
                 .map_err(|e| StageError::invalid("mesh", format!("SDF grid: {e}")))?,
         );
         self.grids
@@ -105,6 +106,86 @@ impl LocalEstimation {
             .map_err(poisoned)?
             .insert(object.mesh_sha256_hex.clone(), grid.clone());
         Ok(grid)
+    }
+}
+
+/// The estimator in-process.
+#[derive(Default)]
+pub struct LocalEstimation {
+    pub refine: SdfRefineConfig,
+    pub prior: PosePrior,
+    pub grids: SdfCache,
+}
+
+/// The render workers in-process: candidate predictions one after another, each render
+/// parallel inside.
+#[derive(Default)]
+pub struct LocalPrediction {
+    /// Thresholds and render settings; the request's σ model, seed and maps override theirs,
+    /// the object's camera its shots and window.
+    pub settings: PredictionSettings,
+    pub grids: SdfCache,
+}
+
+impl PredictionStage for LocalPrediction {
+    fn predict(
+        &self,
+        object: &PredictionObject,
+        request: &PredictionRequest,
+    ) -> Result<Vec<CandidateInformation>, StageError> {
+        let sdf = self.grids.grid(&object.object)?;
+        let predictor = PredictorObject {
+            mesh: object.object.mesh.clone(),
+            sdf,
+            material: object.material,
+            camera: object.camera.clone(),
+            rig: object.rig,
+            noise: object.noise.clone(),
+        };
+        let settings = PredictionSettings {
+            sigma: match request.sigma {
+                PredictionSigma::Rendered => SigmaModel::Rendered,
+                PredictionSigma::Constant { sigma_z_m } => SigmaModel::Constant { sigma_z_m },
+            },
+            shots: object.shots,
+            window_radius_px: object.window_radius_px,
+            with_maps: request.with_maps,
+            ..self.settings
+        };
+        request
+            .candidates
+            .iter()
+            .map(|&(index, t_w_c)| {
+                let started = Instant::now();
+                let p = predict_candidate(
+                    &predictor,
+                    &request.t_w_o,
+                    &t_w_c,
+                    &settings,
+                    candidate_seed(request.seed, index),
+                )
+                .map_err(|e| match e {
+                    PredictionError::Input { field, message } => {
+                        StageError::invalid(field, message)
+                    }
+                    other => StageError::Internal(other.to_string()),
+                })?;
+                Ok(CandidateInformation {
+                    index,
+                    information: p.information,
+                    part_pixels: p.counts.part_pixels,
+                    predicted_points: p.counts.kept,
+                    missing_ratio: p.counts.missing_ratio,
+                    missing_sigma: p.counts.missing_sigma,
+                    not_in_view: p.not_in_view,
+                    sigma_z_m: match (p.sigma_z_m, p.crop) {
+                        (Some(map), Some(crop)) => Some((map, crop.u_min, crop.v_min)),
+                        _ => None,
+                    },
+                    predict_ms: started.elapsed().as_secs_f64() * 1e3,
+                })
+            })
+            .collect()
     }
 }
 
@@ -141,7 +222,7 @@ impl EstimationStage for LocalEstimation {
         settings: &RefineSettings,
     ) -> Result<Refinement, StageError> {
         let started = Instant::now();
-        let grid = self.grid(object)?;
+        let grid = self.grids.grid(object)?;
         let points_at = |t_w_o: &Isometry3<f64>, margin_m: f64| {
             let per_view: Vec<ViewPoints> = views
                 .par_iter()

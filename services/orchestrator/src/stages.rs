@@ -209,18 +209,21 @@ pub struct PredictionRequest {
     pub with_maps: bool,
 }
 
-/// What a render worker must know of the part and the hardware to predict a view: never the
-/// simulator's truth, only what calibration measured.
+/// What a render worker must know of the part and the hardware: never the simulator's truth,
+/// only what calibration measured.
 #[derive(Clone, Debug)]
 pub struct PredictionObject {
     pub object: SessionObject,
     /// The fitted material (`glint calibrate bsdf`).
     pub material: glint_render::bsdf::PrincipledParams<f32>,
-    /// The calibrated camera response (`glint calibrate response`).
-    pub response: glint_calibration::response::ResponseTable,
+    /// The calibrated response and radiometric scale (`glint calibrate response`, `bsdf`).
+    pub camera: glint_uncertainty::CalibratedCamera,
     pub rig: glint_render::rig::SliRig,
     /// The sensor's noise, fitted from a view's noise shots.
     pub noise: glint_estimation::depth_sigma::NoiseModel,
+    /// The camera's pattern shots per capture and matching window radius, px.
+    pub shots: u32,
+    pub window_radius_px: u32,
 }
 
 /// The render workers: candidate-view prediction. Stateless towards the caller: every call

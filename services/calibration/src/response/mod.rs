@@ -115,6 +115,32 @@ impl ResponseTable {
         self.inverse.ln_exposure[self.levels().of(dn)]
     }
 
+    /// g (eq 12): the intensity (DN / max DN, in [0, 1]) a relative exposure `exp(ln_x)`
+    /// reads, interpolated in the forward table. Below the table the response is taken as
+    /// linear through black (I ∝ X), above it the sensor is saturated at the last level.
+    pub fn intensity(&self, ln_x: f64) -> f64 {
+        let ForwardTable {
+            ln_exposure: grid,
+            intensity,
+        } = &self.forward;
+        let (Some(&lo), Some(&hi)) = (grid.first(), grid.last()) else {
+            return 0.0;
+        };
+        if ln_x.is_nan() {
+            return 0.0;
+        }
+        if ln_x <= lo {
+            return intensity[0] * (ln_x - lo).exp();
+        }
+        if ln_x >= hi || grid.len() < 2 {
+            return intensity[intensity.len() - 1];
+        }
+        let x = (ln_x - lo) / (hi - lo) * (grid.len() - 1) as f64;
+        let k = (x.floor() as usize).min(grid.len() - 2);
+        let t = x - k as f64;
+        intensity[k] * (1.0 - t) + intensity[k + 1] * t
+    }
+
     /// The hat weight of `dn` (0 for black and saturated readings).
     pub fn weight(&self, dn: u16) -> f64 {
         let levels = self.levels();
@@ -194,12 +220,22 @@ impl ResponseTable {
 
     /// Reads and checks a table written by [`ResponseTable::save`].
     pub fn load(path: &Path) -> Result<Self, ResponseError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ResponseError::File {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Checks and reads the JSON text of a table; `origin` names where it came from in errors
+    /// (a file, or an embedded default).
+    pub fn parse(text: &str, origin: &Path) -> Result<Self, ResponseError> {
+        let path = origin;
         let fail = |message: String| ResponseError::File {
             path: path.to_owned(),
             message,
         };
-        let text = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
-        let table: Self = serde_json::from_str(&text).map_err(|e| fail(e.to_string()))?;
+        let table: Self = serde_json::from_str(text).map_err(|e| fail(e.to_string()))?;
         if table.format != RESPONSE_FORMAT {
             return Err(fail(format!(
                 "format is {:?}, expected {RESPONSE_FORMAT:?}",
