@@ -11,6 +11,7 @@ use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use nalgebra::Point3;
 use rayon::prelude::*;
 
+mod nbv;
 mod refine;
 
 #[derive(Subcommand)]
@@ -58,11 +59,15 @@ pub enum BenchCommand {
     /// with a known answer: time per refinement, residual evaluations per second (1 thread, all
     /// cores), final errors. `--export` writes the problems for the Open3D/small_gicp script.
     Refine(refine::RefineBenchArgs),
+    /// One next-best-view decision: every candidate predicted (render, σ̌_z, Fisher
+    /// information), then the entropy plan; time per stage on 1 thread and all cores.
+    Nbv(nbv::NbvBenchArgs),
 }
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
     match cmd {
         BenchCommand::Refine(args) => refine::run(&args),
+        BenchCommand::Nbv(args) => nbv::run(&args),
         BenchCommand::Sdf {
             voxel_mm,
             padding_mm,

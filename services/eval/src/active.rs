@@ -163,27 +163,63 @@ impl Calibration {
 pub fn prediction_object(
     scene: &ActiveScene,
     calibration: &Calibration,
+    with_bin: bool,
+) -> anyhow::Result<PredictionObject> {
+    prediction_object_for(
+        &scene.camera.setup,
+        &scene.candidates[scene.first_view],
+        &scene.object,
+        calibration,
+        with_bin,
+    )
+}
+
+/// [`prediction_object`] for any bin set-up, the noise calibrated from `noise_t_w_c`; with
+/// `with_bin` the workers render the bin too (its geometry and its reference material, which
+/// the cell's calibration knows), beyond the paper.
+pub fn prediction_object_for(
+    setup: &BinSetup,
+    noise_t_w_c: &Isometry3<f64>,
+    object: &SessionObject,
+    calibration: &Calibration,
+    with_bin: bool,
 ) -> anyhow::Result<PredictionObject> {
     let scale = calibration.material.radiometric_scale().context(
         "the material file's provenance has no per_view[].radiometric_scale: refit it with \
          glint calibrate bsdf",
     )?;
     // The pattern captures' exposure time is a camera setting, known to the system.
-    let exposure_s = f64::from(scene.camera.setup.config.sensor.exposure_s);
+    let exposure_s = f64::from(setup.config.sensor.exposure_s);
     let camera = CalibratedCamera::new(calibration.response.clone(), scale, exposure_s)?;
-    let info = scene.camera.info().map_err(anyhow::Error::msg)?;
-    let noise_capture = scene
-        .camera
-        .capture(&scene.candidates[scene.first_view], 0x4015E)
-        .map_err(anyhow::Error::msg)?;
+    // A noise calibration of its own (two read-outs of one shot), seeded apart from captures.
+    let mock = setup.camera();
+    let rendered = mock.render_shots(noise_t_w_c, 0x4015E);
+    let [a, b] = mock
+        .noise_shots(&rendered, 0x4015E)
+        .context("the camera took no shot")?;
+    let max_dn = setup.config.sensor.max_dn();
+    let noise = glint_estimation::depth_sigma::NoiseModel::fit_from_pair(
+        &glint_geometry::image::normalised_intensity(&a, max_dn),
+        &glint_geometry::image::normalised_intensity(&b, max_dn),
+        max_dn,
+    )?;
     Ok(PredictionObject {
-        object: scene.object.clone(),
+        object: object.clone(),
         material: calibration.material.params()?,
         camera,
-        rig: info.rig,
-        noise: glint_estimation::view::noise_model_of(&noise_capture.measurement)?,
-        shots: info.shots,
-        window_radius_px: info.window_radius_px,
+        rig: setup.rig,
+        noise,
+        surroundings: if with_bin {
+            vec![glint_uncertainty::KnownSurface {
+                mesh: Arc::new(setup.bin.mesh()),
+                t_w_s: Isometry3::identity(),
+                material: glint_camera::materials::bin(),
+            }]
+        } else {
+            Vec::new()
+        },
+        shots: setup.config.shots,
+        window_radius_px: setup.config.matcher.window_radius_px,
     })
 }
 
@@ -435,7 +471,7 @@ mod tests {
         use glint_orchestrator::local::LocalPrediction;
         let scene = small_scene();
         let calibration = Calibration::embedded(Part::Zigzag).unwrap().unwrap();
-        let object = prediction_object(&scene, &calibration).unwrap();
+        let object = prediction_object(&scene, &calibration, false).unwrap();
         let estimation = LocalEstimation::default();
         let workers = LocalPrediction::default();
         let stages = Stages {

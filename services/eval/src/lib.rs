@@ -5,6 +5,8 @@
 //!   into per-view object points with σ_z (the refiner's input path, eq 1–7);
 //! - [`metrics`]: initial poses drawn like a template detector's, symmetry-aware NEES;
 //! - [`table1`]: Table I, SDF refinement against ICP;
+//! - [`active`]: an active session on a mock bin (the demo's and the tests');
+//! - [`policies`]: Fig. 9, the view policies compared;
 //! - [`progress`]: progress bars for long runs.
 //!
 //! Evaluation code reads ground truth (to draw initial poses and to score); nothing that
@@ -14,6 +16,8 @@
 
 pub mod active;
 pub mod metrics;
+pub mod policies;
+pub mod prediction;
 pub mod progress;
 pub mod scenes;
 pub mod table1;

@@ -141,6 +141,7 @@ impl PredictionStage for LocalPrediction {
             camera: object.camera.clone(),
             rig: object.rig,
             noise: object.noise.clone(),
+            surroundings: object.surroundings.clone(),
         };
         let settings = PredictionSettings {
             sigma: match request.sigma {

@@ -221,6 +221,8 @@ pub struct PredictionObject {
     pub rig: glint_render::rig::SliRig,
     /// The sensor's noise, fitted from a view's noise shots.
     pub noise: glint_estimation::depth_sigma::NoiseModel,
+    /// Known surroundings rendered with the part (the bin), empty for the part alone.
+    pub surroundings: Vec<glint_uncertainty::KnownSurface>,
     /// The camera's pattern shots per capture and matching window radius, px.
     pub shots: u32,
     pub window_radius_px: u32,

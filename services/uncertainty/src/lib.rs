@@ -10,11 +10,13 @@
 //! - [`response`]: the calibrated camera, radiance → intensity (eq 14);
 //! - [`predict`]: one candidate's prediction.
 
+#![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+
 pub mod predict;
 pub mod response;
 
 pub use predict::{
-    CandidatePrediction, MissingCounts, PredictionError, PredictionSettings, PredictorObject,
-    SigmaModel, candidate_seed, predict_candidate,
+    CandidatePrediction, KnownSurface, MissingCounts, PredictionError, PredictionSettings,
+    PredictorObject, SigmaModel, candidate_seed, predict_candidate,
 };
 pub use response::CalibratedCamera;

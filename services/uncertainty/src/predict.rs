@@ -58,6 +58,19 @@ pub struct PredictorObject {
     pub rig: SliRig,
     /// The sensor's intensity noise σ_I² (fitted from two read-outs of one shot).
     pub noise: NoiseModel,
+    /// Known static surroundings rendered with the part (the bin, from the cell's
+    /// calibration): they occlude it and reflect light onto it. Empty: the part alone, as
+    /// the paper renders it.
+    pub surroundings: Vec<KnownSurface>,
+}
+
+/// A known surface of the scene that is not the part.
+#[derive(Clone, Debug)]
+pub struct KnownSurface {
+    pub mesh: Arc<TriMesh>,
+    /// Surface → world.
+    pub t_w_s: Isometry3<f64>,
+    pub material: PrincipledParams<f32>,
 }
 
 /// How a prediction models depth uncertainty.
@@ -96,15 +109,18 @@ pub struct PredictionSettings {
 }
 
 impl Default for PredictionSettings {
-    /// τ_I 0.5 (direct light at least half of what the camera sees) and τ_σ 1 mm (twice the
-    /// default camera's typical σ_z on the parts): starting values, not yet tuned on seeds —
-    /// the paper gives none. 2 spp, the default camera's K = 8 shots, 3×3 windows and
-    /// half-lit patterns, the refiner's σ_model.
+    /// τ_I 0.8 and τ_σ 0.03 mm, chosen on tuning seeds 11–13 (Zigzag, 3 views each, the
+    /// bin rendered too) by the best balanced accuracy of "usable depth" against the mock
+    /// camera's captures (`glint eval prediction --predict-bin --tau-i 0.5,0.7,0.8,0.85,0.9,0.95
+    /// --tau-sigma-mm 0.03,0.05,0.08,0.12,0.2,1000`: 0.764; the part alone peaks at 0.85 /
+    /// 0.03 mm with 0.686); the evaluation seeds are disjoint. 2 spp, the default camera's
+    /// K = 8 shots, 3×3 windows and half-lit patterns, the refiner's σ_model. τ_σ is for that
+    /// 1280×1024 camera: σ̌_z scales as 1/f, so a camera at half the resolution needs twice it.
     fn default() -> Self {
         Self {
             sigma: SigmaModel::Rendered,
-            tau_intensity_ratio: 0.5,
-            tau_sigma_m: 1e-3,
+            tau_intensity_ratio: 0.8,
+            tau_sigma_m: 0.03e-3,
             samples_per_pixel: 2,
             shots: 8,
             window_radius_px: 1,
@@ -128,6 +144,9 @@ pub enum PredictionError {
     Scene(#[from] SceneError),
     #[error("σ̌_z: {0}")]
     Sigma(#[from] DepthSigmaError),
+    /// A crop or image that does not fit: a bug, reported instead of a panic in a worker.
+    #[error("internal: {0}")]
+    Internal(&'static str),
 }
 
 fn input(field: &'static str, message: impl Into<String>) -> PredictionError {
@@ -317,7 +336,7 @@ fn pattern_images(
     projector: &Projector,
     patterns: &[Pattern],
     fill: f64,
-) -> Vec<Image<f32>> {
+) -> Result<Vec<Image<f32>>, PredictionError> {
     let (w, h) = (single.width(), single.height());
     let pk = &projector.intrinsics;
     // Per pixel, its surface point's place in the projector image (once for all patterns).
@@ -343,7 +362,7 @@ fn pattern_images(
                     object.camera.intensity(direct * t + indirect * fill as f32)
                 })
                 .collect();
-            Image::new(w, h, data).expect("sized from the crop")
+            Image::new(w, h, data).map_err(|_| PredictionError::Internal("pattern image size"))
         })
         .collect()
 }
@@ -376,23 +395,35 @@ pub fn predict_candidate(
     let crop_intrinsics = stereo
         .intrinsics
         .cropped(&crop)
-        .expect("the crop is clipped to the image");
+        .ok_or(PredictionError::Internal(
+            "the crop is clipped to the image",
+        ))?;
     let crop_stereo = StereoRig {
         intrinsics: crop_intrinsics,
         ..stereo
     };
 
     let started = Instant::now();
-    let scene = Scene::build(
-        std::slice::from_ref(&*object.mesh),
-        vec![SceneInstance {
-            mesh: 0,
-            t_w_o: *t_w_o,
-            material: 0,
-            label: 1,
-        }],
-        vec![object.material],
-    )?;
+    // The part is label 1; the surroundings follow.
+    let mut meshes = vec![(*object.mesh).clone()];
+    let mut instances = vec![SceneInstance {
+        mesh: 0,
+        t_w_o: *t_w_o,
+        material: 0,
+        label: 1,
+    }];
+    let mut materials = vec![object.material];
+    for (i, surface) in object.surroundings.iter().enumerate() {
+        meshes.push((*surface.mesh).clone());
+        materials.push(surface.material);
+        instances.push(SceneInstance {
+            mesh: i + 1,
+            t_w_o: surface.t_w_s,
+            material: i + 1,
+            label: i as u16 + 2,
+        });
+    }
+    let scene = Scene::build(&meshes, instances, materials)?;
     let projector = object.rig.projector(t_w_c, Pattern::White);
     let cameras: [Camera; 2] = object.rig.cameras(t_w_c);
     let rendered = |camera: &Camera, transport, seed| -> RenderOutput {
@@ -423,9 +454,19 @@ pub fn predict_candidate(
             ));
         }
     }
-    let crop_of_image = |image: &Image<f32>| image.cropped(&crop).expect("inside the image");
-    let depth_left = crop_of_image(&single[0].depth_m);
-    let depth_right = crop_of_image(&single[1].depth_m);
+    let crop_of_image = |image: &Image<f32>| {
+        image
+            .cropped(&crop)
+            .ok_or(PredictionError::Internal("the crop lies inside the image"))
+    };
+    let depth_left = crop_of_image(&single[0].depth_m)?;
+    let depth_right = crop_of_image(&single[1].depth_m)?;
+    let crop_labels = |o: &RenderOutput| {
+        o.label
+            .cropped(&crop)
+            .ok_or(PredictionError::Internal("the crop lies inside the image"))
+    };
+    let (label_left, label_right) = (crop_labels(&single[0])?, crop_labels(&single[1])?);
     let render_ms = ms_since(started);
 
     // Which left pixels are the part, and whether the right camera sees the same point.
@@ -436,13 +477,14 @@ pub fn predict_candidate(
         for u in 0..w {
             let i = (v * w + u) as usize;
             let z = depth_left.data()[i];
-            if !z.is_finite() {
+            if label_left.data()[i] != 1 || !z.is_finite() {
                 continue;
             }
             counts.part_pixels += 1;
             let d = stereo.disparity_from_depth(z as f64);
             let u_right = (u as f64 - d).round();
             let seen = u_right >= 0.0
+                && label_right.get(u_right as u32, v) == Some(1)
                 && depth_right
                     .get(u_right as u32, v)
                     .is_some_and(|zr| (zr - z).abs() as f64 <= settings.occlusion_tolerance_m);
@@ -465,8 +507,8 @@ pub fn predict_candidate(
         }),
         SigmaModel::Rendered => {
             let white = |o: &RenderOutput| crop_of_image(&o.radiance);
-            let (single_l, multi_l) = (white(&single[0]), white(&multi[0]));
-            let (single_r, multi_r) = (white(&single[1]), white(&multi[1]));
+            let (single_l, multi_l) = (white(&single[0])?, white(&multi[0])?);
+            let (single_r, multi_r) = (white(&single[1])?, white(&multi[1])?);
             // eq 16 on the white images through g.
             for (i, c) in cause.iter_mut().enumerate() {
                 if *c != PixelCause::Kept {
@@ -499,7 +541,7 @@ pub fn predict_candidate(
                 &projector,
                 &patterns,
                 settings.pattern_fill,
-            );
+            )?;
             let right = pattern_images(
                 object,
                 &single_r,
@@ -510,7 +552,7 @@ pub fn predict_candidate(
                 &projector,
                 &patterns,
                 settings.pattern_fill,
-            );
+            )?;
             depth_sigma(
                 &left,
                 &right,
@@ -564,7 +606,10 @@ pub fn predict_candidate(
         let causes = cause.iter().map(|&c| c as u8).collect();
         (
             Some(sigma_image),
-            Some(Image::new(w, h, causes).expect("sized from the crop")),
+            Some(
+                Image::new(w, h, causes)
+                    .map_err(|_| PredictionError::Internal("cause map size"))?,
+            ),
         )
     } else {
         (None, None)
@@ -663,6 +708,7 @@ mod tests {
             camera: calibrated(&setup.config.sensor),
             rig: setup.rig,
             noise,
+            surroundings: Vec::new(),
         };
         Fixture {
             setup,
@@ -675,6 +721,9 @@ mod tests {
     fn settings() -> PredictionSettings {
         PredictionSettings {
             with_maps: true,
+            // τ_σ was tuned for the 1280×1024 camera; at this fixture's 640×512, f and so σ̌_z
+            // are twice as large, and these tests are not about the threshold.
+            tau_sigma_m: 1e-3,
             ..PredictionSettings::default()
         }
     }

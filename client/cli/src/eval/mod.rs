@@ -1,6 +1,8 @@
 //! `glint eval …`: the paper's experiments on mock-camera data (or any BOP scene).
 
+mod active_exp;
 mod camera_exp;
+mod prediction_exp;
 mod refine_exp;
 mod uncertainty_exp;
 
@@ -16,6 +18,12 @@ pub enum EvalCommand {
     /// shot count K and window size, on each part's diffuse twin and shiny material, by
     /// distance to depth edges, and a plane at 0.6 m.
     Camera(camera_exp::CameraArgs),
+    /// Fig. 9: active sessions with each view policy (NBV, NBV with constant σ_z, Random,
+    /// Max-Distance) from the same detector poses; error and entropy against views.
+    Active(active_exp::ActiveArgs),
+    /// How well the render workers predict the depth pixels a view loses (eq 16–17) over a
+    /// grid of τ_I and τ_σ: on tuning seeds to choose them, on evaluation seeds to judge.
+    Prediction(prediction_exp::PredictionArgs),
 }
 
 pub fn run(command: EvalCommand) -> anyhow::Result<()> {
@@ -23,5 +31,7 @@ pub fn run(command: EvalCommand) -> anyhow::Result<()> {
         EvalCommand::Refine(args) => refine_exp::run(&args),
         EvalCommand::Uncertainty(args) => uncertainty_exp::run(&args),
         EvalCommand::Camera(args) => camera_exp::run(&args),
+        EvalCommand::Active(args) => active_exp::run_cmd(&args),
+        EvalCommand::Prediction(args) => prediction_exp::run_cmd(&args),
     }
 }

@@ -1,0 +1,146 @@
+//! `glint bench nbv`: one next-best-view decision — every candidate predicted by the render
+//! workers, then the minimum-entropy plan — on a mock bin, with the time per stage, on 1
+//! thread and on all cores.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use glint_estimation::nbv::{PosePrior, plan_next_view};
+use glint_eval::active::{ActiveSceneSpec, Calibration, prediction_object, set_up};
+use glint_geometry::Part;
+use glint_geometry::io::write_file_atomically;
+use glint_orchestrator::local::SdfCache;
+use glint_uncertainty::{PredictionSettings, PredictorObject, candidate_seed, predict_candidate};
+use nalgebra::Matrix6;
+
+#[derive(clap::Args)]
+pub struct NbvBenchArgs {
+    #[arg(long, default_value = "zigzag", value_parser = crate::mesh_cmd::parse_part)]
+    pub part: Part,
+    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(2..=1024))]
+    pub candidates: u32,
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub instances: u32,
+    #[arg(long, default_value = "1280x1024", value_parser = crate::capture_cmd::parse_resolution)]
+    pub resolution: (u32, u32),
+    /// Render the bin with the part.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub predict_bin: bool,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Also write the table as CSV here.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+}
+
+/// Sums over the candidates of one decision, milliseconds (per-stage times are each
+/// candidate's own, so with parallel renders inside they add up to about the wall time).
+#[derive(Clone, Copy, Debug, Default)]
+struct DecisionTimes {
+    render_ms: f64,
+    sigma_ms: f64,
+    fim_ms: f64,
+    entropy_ms: f64,
+    total_ms: f64,
+}
+
+pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
+    let scene = set_up(&ActiveSceneSpec {
+        part: args.part,
+        instances: args.instances,
+        seed: args.seed,
+        width_px: args.resolution.0,
+        height_px: args.resolution.1,
+        samples_per_pixel: 2,
+        candidates: args.candidates as usize,
+    })?;
+    let calibration = Calibration::embedded(args.part).with_context(|| {
+        format!(
+            "no calibration is embedded for the {}",
+            args.part.display_name()
+        )
+    })??;
+    let object = prediction_object(&scene, &calibration, args.predict_bin)?;
+    let predictor = PredictorObject {
+        mesh: object.object.mesh.clone(),
+        sdf: SdfCache::default()
+            .grid(&object.object)
+            .map_err(anyhow::Error::msg)?,
+        material: object.material,
+        camera: object.camera.clone(),
+        rig: object.rig,
+        noise: object.noise.clone(),
+        surroundings: object.surroundings.clone(),
+    };
+    let settings = PredictionSettings {
+        shots: object.shots,
+        window_radius_px: object.window_radius_px,
+        ..PredictionSettings::default()
+    };
+    let decide = || -> anyhow::Result<DecisionTimes> {
+        let started = Instant::now();
+        let mut times = DecisionTimes::default();
+        let mut informations = Vec::with_capacity(scene.candidates.len());
+        for (i, t_w_c) in scene.candidates.iter().enumerate() {
+            let p = predict_candidate(
+                &predictor,
+                &scene.initial_t_w_o,
+                t_w_c,
+                &settings,
+                candidate_seed(args.seed, i as u32),
+            )?;
+            times.render_ms += p.render_ms;
+            times.sigma_ms += p.sigma_ms;
+            times.fim_ms += p.information_ms;
+            informations.push(p.information);
+        }
+        let t = Instant::now();
+        plan_next_view(&Matrix6::zeros(), &informations, &[], &PosePrior::default())?;
+        times.entropy_ms = t.elapsed().as_secs_f64() * 1e3;
+        times.total_ms = started.elapsed().as_secs_f64() * 1e3;
+        Ok(times)
+    };
+    let all = rayon::current_num_threads();
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    // A warm-up decision: caches, page faults.
+    decide()?;
+    let rows = [(1, one.install(decide)?), (all, decide()?)];
+    let mut table = format!(
+        "One NBV decision on the {} ({} in the bin, {}×{} px, bin rendered: {}): {} candidates \
+         predicted (render, σ̌_z, FIM), then the entropy plan.\n\n\
+         | threads | render ms | σ̌_z ms | FIM ms | entropy ms | total ms | per candidate ms |\n\
+         |---:|---:|---:|---:|---:|---:|---:|\n",
+        args.part.display_name(),
+        args.instances,
+        args.resolution.0,
+        args.resolution.1,
+        args.predict_bin,
+        args.candidates
+    );
+    let mut csv =
+        String::from("threads,candidates,render_ms,sigma_ms,fim_ms,entropy_ms,total_ms\n");
+    for (threads, t) in rows {
+        let _ = writeln!(
+            table,
+            "| {threads} | {:.0} | {:.0} | {:.1} | {:.2} | {:.0} | {:.1} |",
+            t.render_ms,
+            t.sigma_ms,
+            t.fim_ms,
+            t.entropy_ms,
+            t.total_ms,
+            t.total_ms / args.candidates as f64
+        );
+        let _ = writeln!(
+            csv,
+            "{threads},{},{:.3},{:.3},{:.3},{:.3},{:.3}",
+            args.candidates, t.render_ms, t.sigma_ms, t.fim_ms, t.entropy_ms, t.total_ms
+        );
+    }
+    println!("{table}");
+    if let Some(path) = &args.csv {
+        write_file_atomically(path, csv.as_bytes())?;
+    }
+    Ok(())
+}
