@@ -175,18 +175,11 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let estimation = LocalEstimation::default();
     let workers = LocalPrediction::default();
     let prediction_object = if args.policy.prediction(CONST_SIGMA_Z_M).is_some() {
-        let calibration = match (&args.material, &args.response) {
-            (Some(m), Some(r)) => Calibration::load(m, r)?,
-            _ => Calibration::embedded(args.part).with_context(|| {
-                format!(
-                    "policy {} renders the part with its calibrated material: only the Zigzag's \
-                     is embedded; pass --material and --response (glint calibrate bsdf and \
-                     response) for the {}",
-                    args.policy.name(),
-                    args.part.display_name()
-                )
-            })??,
-        };
+        let calibration = Calibration::from_files_or_embedded(
+            args.part,
+            args.material.as_deref(),
+            args.response.as_deref(),
+        )?;
         Some(prediction_object(&scene, &calibration, args.predict_bin)?)
     } else {
         None

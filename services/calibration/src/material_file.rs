@@ -68,21 +68,14 @@ impl MaterialFile {
 
     /// Reads and validates `path`: the format, every parameter present and in range.
     pub fn load(path: &Path) -> Result<Self, MaterialFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| MaterialFileError::Read {
-            path: path.into(),
-            source,
-        })?;
-        Self::parse(&text, path)
+        Self::parse(&read_text(path)?, path)
     }
 
     /// Checks and reads the JSON text of a material file; `origin` names where it came from in
     /// errors (a file, or an embedded default).
     pub fn parse(text: &str, origin: &Path) -> Result<Self, MaterialFileError> {
         let path = origin;
-        let file: Self = serde_json::from_str(text).map_err(|e| MaterialFileError::Malformed {
-            path: path.into(),
-            problem: e.to_string(),
-        })?;
+        let file: Self = from_json(text, path)?;
         if file.format != MATERIAL_FORMAT {
             return Err(MaterialFileError::Format {
                 path: path.into(),
@@ -142,21 +135,7 @@ impl GroundTruthMaterials {
     }
 
     pub fn load(path: &Path) -> Result<Self, MaterialFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| MaterialFileError::Read {
-            path: path.into(),
-            source,
-        })?;
-        Self::parse(&text, path)
-    }
-
-    /// Checks and reads the JSON text of a material file; `origin` names where it came from in
-    /// errors (a file, or an embedded default).
-    pub fn parse(text: &str, origin: &Path) -> Result<Self, MaterialFileError> {
-        let path = origin;
-        let file: Self = serde_json::from_str(text).map_err(|e| MaterialFileError::Malformed {
-            path: path.into(),
-            problem: e.to_string(),
-        })?;
+        let file: Self = from_json(&read_text(path)?, path)?;
         validated(path, &file.part_material, "part_material")?;
         validated(path, &file.bin_material, "bin_material")?;
         Ok(file)
@@ -181,6 +160,23 @@ fn validated(
     params_from_map(map, field).map_err(|source| MaterialFileError::Params {
         path: path.into(),
         source,
+    })
+}
+
+fn read_text(path: &Path) -> Result<String, MaterialFileError> {
+    std::fs::read_to_string(path).map_err(|source| MaterialFileError::Read {
+        path: path.into(),
+        source,
+    })
+}
+
+fn from_json<T: serde::de::DeserializeOwned>(
+    text: &str,
+    origin: &Path,
+) -> Result<T, MaterialFileError> {
+    serde_json::from_str(text).map_err(|e| MaterialFileError::Malformed {
+        path: origin.into(),
+        problem: e.to_string(),
     })
 }
 

@@ -143,6 +143,27 @@ impl Calibration {
         })
     }
 
+    /// From `--material`/`--response` files when given (both), else the calibration shipped
+    /// for `part`; the error says how to provide one.
+    pub fn from_files_or_embedded(
+        part: Part,
+        material: Option<&Path>,
+        response: Option<&Path>,
+    ) -> anyhow::Result<Self> {
+        match (material, response) {
+            (Some(m), Some(r)) => Self::load(m, r),
+            (None, None) => Self::embedded(part).with_context(|| {
+                format!(
+                    "rendering the {} needs its calibrated material and response: only the \
+                     Zigzag's are embedded; pass --material and --response (from glint \
+                     calibrate bsdf and glint calibrate response)",
+                    part.display_name()
+                )
+            })?,
+            _ => anyhow::bail!("--material and --response go together"),
+        }
+    }
+
     /// The calibration shipped with Glint for `part` (assets/calibration/, made by the commands
     /// in its README), if there is one: today the Zigzag's.
     pub fn embedded(part: Part) -> Option<anyhow::Result<Self>> {

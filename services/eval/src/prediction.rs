@@ -15,7 +15,7 @@ use glint_geometry::Part;
 use glint_orchestrator::local::SdfCache;
 use glint_orchestrator::stages::SessionObject;
 use glint_uncertainty::predict::PixelCause;
-use glint_uncertainty::{PredictionSettings, PredictorObject, predict_candidate};
+use glint_uncertainty::{PredictionSettings, predict_candidate};
 use std::sync::Arc;
 
 use crate::active::{Calibration, prediction_object_for};
@@ -128,15 +128,7 @@ pub fn run(
         let views = setup.views(study.views);
         let calibrated =
             prediction_object_for(&setup, &views[0], &object, calibration, study.with_bin)?;
-        let predictor = PredictorObject {
-            mesh: object.mesh.clone(),
-            sdf: sdf.clone(),
-            material: calibrated.material,
-            camera: calibrated.camera,
-            rig: setup.rig,
-            noise: calibrated.noise,
-            surroundings: calibrated.surroundings,
-        };
+        let predictor = calibrated.predictor(sdf.clone());
         for (k, t_w_c) in views.iter().enumerate() {
             let view_seed = glint_camera::setup::capture_seed(seed, k);
             let rendered = camera.render_shots(t_w_c, view_seed);

@@ -21,8 +21,7 @@ use crate::stages::{
     SessionObject, StageError, ViewPlan,
 };
 use glint_uncertainty::{
-    PredictionError, PredictionSettings, PredictorObject, SigmaModel, candidate_seed,
-    predict_candidate,
+    PredictionError, PredictionSettings, SigmaModel, candidate_seed, predict_candidate,
 };
 
 /// The mock structured-light camera looking at a bin of parts.
@@ -117,8 +116,8 @@ pub struct LocalEstimation {
     pub grids: SdfCache,
 }
 
-/// The render workers in-process: candidate predictions one after another, each render
-/// parallel inside.
+/// The render workers in-process: candidate predictions in parallel (and each render parallel
+/// inside).
 #[derive(Default)]
 pub struct LocalPrediction {
     /// Thresholds and render settings; the request's σ model, seed and maps override theirs,
@@ -133,16 +132,7 @@ impl PredictionStage for LocalPrediction {
         object: &PredictionObject,
         request: &PredictionRequest,
     ) -> Result<Vec<CandidateInformation>, StageError> {
-        let sdf = self.grids.grid(&object.object)?;
-        let predictor = PredictorObject {
-            mesh: object.object.mesh.clone(),
-            sdf,
-            material: object.material,
-            camera: object.camera.clone(),
-            rig: object.rig,
-            noise: object.noise.clone(),
-            surroundings: object.surroundings.clone(),
-        };
+        let predictor = object.predictor(self.grids.grid(&object.object)?);
         let settings = PredictionSettings {
             sigma: match request.sigma {
                 PredictionSigma::Rendered => SigmaModel::Rendered,
@@ -153,9 +143,10 @@ impl PredictionStage for LocalPrediction {
             with_maps: request.with_maps,
             ..self.settings
         };
+        // Candidates in parallel: each one's crop is small, so one render alone leaves cores idle.
         request
             .candidates
-            .iter()
+            .par_iter()
             .map(|&(index, t_w_c)| {
                 let started = Instant::now();
                 let p = predict_candidate(

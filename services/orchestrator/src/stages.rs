@@ -228,6 +228,24 @@ pub struct PredictionObject {
     pub window_radius_px: u32,
 }
 
+impl PredictionObject {
+    /// The render workers' view of this object, with the part's SDF grid.
+    pub fn predictor(
+        &self,
+        sdf: Arc<glint_geometry::sdf::SdfGrid>,
+    ) -> glint_uncertainty::PredictorObject {
+        glint_uncertainty::PredictorObject {
+            mesh: self.object.mesh.clone(),
+            sdf,
+            material: self.material,
+            camera: self.camera.clone(),
+            rig: self.rig,
+            noise: self.noise.clone(),
+            surroundings: self.surroundings.clone(),
+        }
+    }
+}
+
 /// The render workers: candidate-view prediction. Stateless towards the caller: every call
 /// names its object, which an implementation may cache by content hash.
 pub trait PredictionStage: Send + Sync {

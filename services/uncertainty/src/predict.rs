@@ -27,7 +27,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Vec3A;
-use glint_estimation::depth_sigma::{DepthSigmaError, NoiseModel, depth_sigma};
+use glint_estimation::depth_sigma::{DepthSigmaError, NoiseModel, depth_sigma_shifted};
 use glint_estimation::points::{DepthPoint, DepthSigma, object_points};
 use glint_estimation::refine::information_of_points;
 use glint_geometry::TriMesh;
@@ -99,6 +99,9 @@ pub struct PredictionSettings {
     pub window_radius_px: u32,
     /// Fraction of lit projector pixels in the camera's dot patterns.
     pub pattern_fill: f64,
+    /// Seed of the synthesised dot patterns: a fixed set, like a projector's, so workers make
+    /// them once ([`shot_patterns`]).
+    pub pattern_seed: u64,
     /// σ_model of the refiner (eq 11), metres, so predicted information weighs as refined.
     pub model_sigma_m: f64,
     /// A left pixel's surface point counts as seen by the right camera when the right
@@ -112,8 +115,8 @@ impl Default for PredictionSettings {
     /// τ_I 0.8 and τ_σ 0.03 mm, chosen on tuning seeds 11–13 (Zigzag, 3 views each, the
     /// bin rendered too) by the best balanced accuracy of "usable depth" against the mock
     /// camera's captures (`glint eval prediction --predict-bin --tau-i 0.5,0.7,0.8,0.85,0.9,0.95
-    /// --tau-sigma-mm 0.03,0.05,0.08,0.12,0.2,1000`: 0.764; the part alone peaks at 0.85 /
-    /// 0.03 mm with 0.686); the evaluation seeds are disjoint. 2 spp, the default camera's
+    /// --tau-sigma-mm 0.03,0.05,0.08,0.12,0.2,1000`: 0.765; the part alone peaks at 0.85 /
+    /// 0.03 mm with 0.687); the evaluation seeds are disjoint. 2 spp, the default camera's
     /// K = 8 shots, 3×3 windows and half-lit patterns, the refiner's σ_model. τ_σ is for that
     /// 1280×1024 camera: σ̌_z scales as 1/f, so a camera at half the resolution needs twice it.
     fn default() -> Self {
@@ -125,6 +128,7 @@ impl Default for PredictionSettings {
             shots: 8,
             window_radius_px: 1,
             pattern_fill: 0.5,
+            pattern_seed: 0x9A77_E2D5,
             model_sigma_m: glint_estimation::refine::SdfRefineConfig::default().model_sigma_m,
             occlusion_tolerance_m: 1e-3,
             with_maps: false,
@@ -279,19 +283,29 @@ fn validate(settings: &PredictionSettings) -> Result<(), PredictionError> {
     Ok(())
 }
 
-/// The crop of both rectified images that holds the part's projection (its bounding box's
-/// corners, at the hypothesis) in the left camera and, shifted by the disparity, in the right,
-/// grown by `margin_px`; `None` when the part is behind the camera or outside the image.
-fn crop_of(
+/// Where each camera's crop lies: the left crop, clipped to the image, and how many columns
+/// left of it the equally sized right crop starts (`right_shift_px`, ≥ the largest disparity,
+/// so that a left crop pixel `u` at disparity `d` is right crop column `u − d + shift ≥ u`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Crops {
+    left: PixelRect,
+    right_shift_px: i64,
+}
+
+/// The crops that hold the part's projection (its bounding box's corners at the hypothesis) in
+/// the left camera and, shifted by the disparity, in the right, grown by `margin_px`; `None`
+/// when the part is behind the camera or outside the image.
+fn crops_of(
     mesh: &TriMesh,
     stereo: &StereoRig,
     t_c_o: &Isometry3<f64>,
     margin_px: u32,
-) -> Option<PixelRect> {
+) -> Option<Crops> {
     let (lo, hi) = mesh.aabb()?;
     let k = &stereo.intrinsics;
     let mut u = (f64::INFINITY, f64::NEG_INFINITY);
     let mut v = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut d = (f64::INFINITY, f64::NEG_INFINITY);
     for i in 0..8 {
         let corner = Point3::new(
             if i & 1 == 0 { lo.x } else { hi.x },
@@ -304,12 +318,27 @@ fn crop_of(
             return None; // a part this close (or behind) is not a view to take
         }
         let uv = k.project(&p_c)?;
-        let d = stereo.disparity_from_depth(p_c.z);
-        u = (u.0.min(uv.x - d), u.1.max(uv.x));
+        let disparity = stereo.disparity_from_depth(p_c.z);
+        u = (u.0.min(uv.x), u.1.max(uv.x));
         v = (v.0.min(uv.y), v.1.max(uv.y));
+        d = (d.0.min(disparity), d.1.max(disparity));
     }
     let m = margin_px as f64;
-    PixelRect::covering(u.0 - m, v.0 - m, u.1 + m, v.1 + m, k.width_px, k.height_px)
+    // Wide enough for the right camera's view of the part, whose columns spread by the
+    // disparity range.
+    let width = (u.1 - u.0) + (d.1 - d.0) + 2.0 * m + 1.0;
+    let left = PixelRect::covering(
+        u.0 - m,
+        v.0 - m,
+        u.0 - m + width,
+        v.1 + m,
+        k.width_px,
+        k.height_px,
+    )?;
+    Some(Crops {
+        left,
+        right_shift_px: d.1.ceil() as i64,
+    })
 }
 
 /// The world point a pixel of the crop sees at depth `z_m` (through its centre).
@@ -367,6 +396,54 @@ fn pattern_images(
         .collect()
 }
 
+/// The K synthesised dot patterns for a projector, made once per process for each
+/// (size, K, fill, seed) and shared: drawing them costs more than a candidate's renders.
+pub fn shot_patterns(
+    projector: &PinholeIntrinsics,
+    shots: u32,
+    fill: f64,
+    seed: u64,
+) -> Arc<Vec<Pattern>> {
+    type Key = (u32, u32, u32, u64, u64);
+    static CACHE: std::sync::Mutex<Vec<(Key, Arc<Vec<Pattern>>)>> =
+        std::sync::Mutex::new(Vec::new());
+    let key = (
+        projector.width_px,
+        projector.height_px,
+        shots,
+        fill.to_bits(),
+        seed,
+    );
+    let make = || {
+        Arc::new(
+            (0..shots)
+                .map(|k| {
+                    Pattern::random_dots(
+                        projector.width_px,
+                        projector.height_px,
+                        fill,
+                        candidate_seed(seed, k),
+                    )
+                })
+                .collect::<Vec<_>>(),
+        )
+    };
+    // A poisoned lock only means another thread panicked mid-insert: make them afresh.
+    let Ok(mut cache) = CACHE.lock() else {
+        return make();
+    };
+    if let Some((_, patterns)) = cache.iter().find(|(k, _)| *k == key) {
+        return patterns.clone();
+    }
+    let patterns = make();
+    // A handful of projectors at most; keep the newest few.
+    if cache.len() >= 8 {
+        cache.remove(0);
+    }
+    cache.push((key, patterns.clone()));
+    patterns
+}
+
 fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
@@ -389,15 +466,22 @@ pub fn predict_candidate(
     }
     let stereo = object.rig.stereo;
     let t_c_o = t_w_c.inverse() * t_w_o;
-    let Some(crop) = crop_of(&object.mesh, &stereo, &t_c_o, settings.window_radius_px + 2) else {
+    let Some(crops) = crops_of(&object.mesh, &stereo, &t_c_o, settings.window_radius_px + 2) else {
         return Ok(CandidatePrediction::empty(true));
     };
+    let crop = crops.left;
+    let internal = |what| PredictionError::Internal(what);
     let crop_intrinsics = stereo
         .intrinsics
         .cropped(&crop)
-        .ok_or(PredictionError::Internal(
-            "the crop is clipped to the image",
-        ))?;
+        .ok_or(internal("the crop is clipped to the image"))?;
+    // The right crop: same size, `right_shift_px` columns further left (it may reach past
+    // the sensor's edge; those pixels are not seen).
+    let right_u0 = i64::from(crop.u_min) - crops.right_shift_px;
+    let right_intrinsics = PinholeIntrinsics {
+        cx_px: stereo.intrinsics.cx_px - right_u0 as f64,
+        ..crop_intrinsics
+    };
     let crop_stereo = StereoRig {
         intrinsics: crop_intrinsics,
         ..stereo
@@ -425,7 +509,18 @@ pub fn predict_candidate(
     }
     let scene = Scene::build(&meshes, instances, materials)?;
     let projector = object.rig.projector(t_w_c, Pattern::White);
-    let cameras: [Camera; 2] = object.rig.cameras(t_w_c);
+    let [left_camera, right_camera] = object.rig.cameras(t_w_c);
+    // Each camera cropped to its crop: crop-sized renders, the same rays as the full image's.
+    let cameras = [
+        Camera {
+            intrinsics: crop_intrinsics,
+            ..left_camera
+        },
+        Camera {
+            intrinsics: right_intrinsics,
+            ..right_camera
+        },
+    ];
     let rendered = |camera: &Camera, transport, seed| -> RenderOutput {
         render(
             &scene,
@@ -434,7 +529,7 @@ pub fn predict_candidate(
             &RenderSettings {
                 transport,
                 samples_per_pixel: settings.samples_per_pixel,
-                roi: Some(crop),
+                roi: None,
                 seed,
             },
         )
@@ -454,19 +549,9 @@ pub fn predict_candidate(
             ));
         }
     }
-    let crop_of_image = |image: &Image<f32>| {
-        image
-            .cropped(&crop)
-            .ok_or(PredictionError::Internal("the crop lies inside the image"))
-    };
-    let depth_left = crop_of_image(&single[0].depth_m)?;
-    let depth_right = crop_of_image(&single[1].depth_m)?;
-    let crop_labels = |o: &RenderOutput| {
-        o.label
-            .cropped(&crop)
-            .ok_or(PredictionError::Internal("the crop lies inside the image"))
-    };
-    let (label_left, label_right) = (crop_labels(&single[0])?, crop_labels(&single[1])?);
+    let depth_left = single[0].depth_m.clone();
+    let depth_right = single[1].depth_m.clone();
+    let (label_left, label_right) = (&single[0].label, &single[1].label);
     let render_ms = ms_since(started);
 
     // Which left pixels are the part, and whether the right camera sees the same point.
@@ -482,8 +567,11 @@ pub fn predict_candidate(
             }
             counts.part_pixels += 1;
             let d = stereo.disparity_from_depth(z as f64);
-            let u_right = (u as f64 - d).round();
+            let u_right = (u as f64 - d + crops.right_shift_px as f64).round();
+            let on_sensor =
+                (0..i64::from(stereo.intrinsics.width_px)).contains(&(right_u0 + u_right as i64));
             let seen = u_right >= 0.0
+                && on_sensor
                 && label_right.get(u_right as u32, v) == Some(1)
                 && depth_right
                     .get(u_right as u32, v)
@@ -506,9 +594,8 @@ pub fn predict_candidate(
             }
         }),
         SigmaModel::Rendered => {
-            let white = |o: &RenderOutput| crop_of_image(&o.radiance);
-            let (single_l, multi_l) = (white(&single[0])?, white(&multi[0])?);
-            let (single_r, multi_r) = (white(&single[1])?, white(&multi[1])?);
+            let (single_l, multi_l) = (&single[0].radiance, &multi[0].radiance);
+            let (single_r, multi_r) = (&single[1].radiance, &multi[1].radiance);
             // eq 16 on the white images through g.
             for (i, c) in cause.iter_mut().enumerate() {
                 if *c != PixelCause::Kept {
@@ -520,21 +607,16 @@ pub fn predict_candidate(
                     *c = PixelCause::Ratio;
                 }
             }
-            let pk = &object.rig.projector_intrinsics;
-            let patterns: Vec<Pattern> = (0..settings.shots)
-                .map(|k| {
-                    Pattern::random_dots(
-                        pk.width_px,
-                        pk.height_px,
-                        settings.pattern_fill,
-                        candidate_seed(seed, k),
-                    )
-                })
-                .collect();
+            let patterns = shot_patterns(
+                &object.rig.projector_intrinsics,
+                settings.shots,
+                settings.pattern_fill,
+                settings.pattern_seed,
+            );
             let left = pattern_images(
                 object,
-                &single_l,
-                &multi_l,
+                single_l,
+                multi_l,
                 &depth_left,
                 &crop_intrinsics,
                 &cameras[0].t_w_c,
@@ -544,22 +626,23 @@ pub fn predict_candidate(
             )?;
             let right = pattern_images(
                 object,
-                &single_r,
-                &multi_r,
+                single_r,
+                multi_r,
                 &depth_right,
-                &crop_intrinsics,
+                &right_intrinsics,
                 &cameras[1].t_w_c,
                 &projector,
                 &patterns,
                 settings.pattern_fill,
             )?;
-            depth_sigma(
+            depth_sigma_shifted(
                 &left,
                 &right,
                 &DepthMap::new(depth_left.clone()),
                 &crop_stereo,
                 &object.noise,
                 settings.window_radius_px,
+                crops.right_shift_px,
             )?
         }
     };

@@ -6,14 +6,14 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Context;
 use glint_estimation::nbv::{PosePrior, plan_next_view};
 use glint_eval::active::{ActiveSceneSpec, Calibration, prediction_object, set_up};
 use glint_geometry::Part;
 use glint_geometry::io::write_file_atomically;
 use glint_orchestrator::local::SdfCache;
-use glint_uncertainty::{PredictionSettings, PredictorObject, candidate_seed, predict_candidate};
+use glint_uncertainty::{PredictionSettings, candidate_seed, predict_candidate};
 use nalgebra::Matrix6;
+use rayon::prelude::*;
 
 #[derive(clap::Args)]
 pub struct NbvBenchArgs {
@@ -35,8 +35,9 @@ pub struct NbvBenchArgs {
     pub csv: Option<PathBuf>,
 }
 
-/// Sums over the candidates of one decision, milliseconds (per-stage times are each
-/// candidate's own, so with parallel renders inside they add up to about the wall time).
+/// One decision, milliseconds: per stage the sum over the candidates of each one's own time
+/// (candidates run in parallel, so on n threads the stages add up to about n × the wall
+/// time), and the decision's wall time.
 #[derive(Clone, Copy, Debug, Default)]
 struct DecisionTimes {
     render_ms: f64,
@@ -56,24 +57,13 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
         samples_per_pixel: 2,
         candidates: args.candidates as usize,
     })?;
-    let calibration = Calibration::embedded(args.part).with_context(|| {
-        format!(
-            "no calibration is embedded for the {}",
-            args.part.display_name()
-        )
-    })??;
+    let calibration = Calibration::from_files_or_embedded(args.part, None, None)?;
     let object = prediction_object(&scene, &calibration, args.predict_bin)?;
-    let predictor = PredictorObject {
-        mesh: object.object.mesh.clone(),
-        sdf: SdfCache::default()
+    let predictor = object.predictor(
+        SdfCache::default()
             .grid(&object.object)
             .map_err(anyhow::Error::msg)?,
-        material: object.material,
-        camera: object.camera.clone(),
-        rig: object.rig,
-        noise: object.noise.clone(),
-        surroundings: object.surroundings.clone(),
-    };
+    );
     let settings = PredictionSettings {
         shots: object.shots,
         window_radius_px: object.window_radius_px,
@@ -82,15 +72,23 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
     let decide = || -> anyhow::Result<DecisionTimes> {
         let started = Instant::now();
         let mut times = DecisionTimes::default();
-        let mut informations = Vec::with_capacity(scene.candidates.len());
-        for (i, t_w_c) in scene.candidates.iter().enumerate() {
-            let p = predict_candidate(
-                &predictor,
-                &scene.initial_t_w_o,
-                t_w_c,
-                &settings,
-                candidate_seed(args.seed, i as u32),
-            )?;
+        // As the workers do: candidates in parallel.
+        let predictions: Vec<_> = scene
+            .candidates
+            .par_iter()
+            .enumerate()
+            .map(|(i, t_w_c)| {
+                predict_candidate(
+                    &predictor,
+                    &scene.initial_t_w_o,
+                    t_w_c,
+                    &settings,
+                    candidate_seed(args.seed, i as u32),
+                )
+            })
+            .collect::<Result<_, _>>()?;
+        let mut informations = Vec::with_capacity(predictions.len());
+        for p in predictions {
             times.render_ms += p.render_ms;
             times.sigma_ms += p.sigma_ms;
             times.fim_ms += p.information_ms;

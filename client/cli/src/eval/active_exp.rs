@@ -55,15 +55,14 @@ pub fn run_cmd(args: &ActiveArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let needs = args.policies.iter().any(|p| p.prediction(1e-3).is_some());
-    let calibration = match (&args.material, &args.response) {
-        (Some(m), Some(r)) => Some(Calibration::load(m, r)?),
-        _ if needs => Some(Calibration::embedded(args.part).with_context(|| {
-            format!(
-                "the entropy policies need the {}'s calibration: pass --material and --response",
-                args.part.display_name()
-            )
-        })??),
-        _ => None,
+    let calibration = if needs {
+        Some(Calibration::from_files_or_embedded(
+            args.part,
+            args.material.as_deref(),
+            args.response.as_deref(),
+        )?)
+    } else {
+        None
     };
     let spec = PolicyComparison {
         part: args.part,

@@ -61,15 +61,11 @@ pub fn run_cmd(args: &PredictionArgs) -> anyhow::Result<()> {
     );
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let calibration = match (&args.material, &args.response) {
-        (Some(m), Some(r)) => Calibration::load(m, r)?,
-        _ => Calibration::embedded(args.part).with_context(|| {
-            format!(
-                "no calibration is embedded for the {}: pass --material and --response",
-                args.part.display_name()
-            )
-        })??,
-    };
+    let calibration = Calibration::from_files_or_embedded(
+        args.part,
+        args.material.as_deref(),
+        args.response.as_deref(),
+    )?;
     let study = PredictionStudy {
         part: args.part,
         seeds: args.seeds.clone(),
