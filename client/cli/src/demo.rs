@@ -18,6 +18,7 @@ use glint_geometry::parts::Part;
 use glint_geometry::pose_deviation::PoseDeviation;
 use glint_orchestrator::local::{LocalEstimation, LocalPrediction};
 use glint_orchestrator::session::{self, Session, Stages, StepRecord, ViewPolicy};
+use glint_orchestrator::stages::PredictionObject;
 
 pub const DEFAULT_OUT: &str = "glint-out";
 
@@ -218,9 +219,35 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         session.state,
         session.steps.len()
     );
-    let index = write_report(out, &scene, &session, &header)?;
+    let index = write_report(out, &scene, &session, &header, prediction_object.as_ref())?;
     println!("Report: {}", index.display());
     Ok(())
+}
+
+/// The σ̌_z map the render workers predicted for the view chosen after `step` (the same
+/// request as the planner's, with maps), as EXR and PNG at `stem`.
+fn predicted_map(
+    object: &PredictionObject,
+    predictor: &glint_uncertainty::PredictorObject,
+    session: &Session,
+    step: &StepRecord,
+    next: usize,
+    stem: &Path,
+) -> anyhow::Result<()> {
+    let settings = glint_uncertainty::PredictionSettings {
+        shots: object.shots,
+        window_radius_px: object.window_radius_px,
+        with_maps: true,
+        ..glint_uncertainty::PredictionSettings::default()
+    };
+    let prediction = glint_uncertainty::predict_candidate(
+        predictor,
+        &step.t_w_o,
+        &session.config.candidates[next],
+        &settings,
+        glint_uncertainty::candidate_seed(session.config.seed, next as u32),
+    )?;
+    glint_eval::active::write_prediction_maps(&prediction, stem, 0.1e-3)
 }
 
 /// An entropy with two decimals, or "-" when there is none.
@@ -268,12 +295,24 @@ fn write_report(
     scene: &ActiveScene,
     session: &Session,
     header: &str,
+    prediction: Option<&PredictionObject>,
 ) -> anyhow::Result<PathBuf> {
     let (initial, devs) = deviations(scene, &session.steps);
     let captures = out.join("captures");
     std::fs::create_dir_all(&captures)
         .with_context(|| format!("creating {}", captures.display()))?;
     let mut rows = String::new();
+    // The render workers' view of the part, for the predicted maps.
+    let predictor = match prediction {
+        Some(object) => Some(
+            object.predictor(
+                glint_orchestrator::local::SdfCache::default()
+                    .grid(&object.object)
+                    .map_err(anyhow::Error::msg)?,
+            ),
+        ),
+        None => None,
+    };
     for (step, view) in session.steps.iter().zip(&session.views) {
         let m = &view.measurement;
         let left = to_8bit(&m.left[0], m.max_dn);
@@ -293,11 +332,22 @@ fn write_report(
         let depth_path = captures.join(format!("step{:02}_depth.png", step.step));
         write_file_atomically(&depth_path, &depth_png)
             .with_context(|| format!("writing {}", depth_path.display()))?;
+        let next_map = match (prediction.zip(predictor.as_ref()), step.next_view) {
+            (Some((object, predictor)), Some(next)) => {
+                let stem = captures.join(format!("step{:02}_next_view_sigma", step.step));
+                predicted_map(object, predictor, session, step, next, &stem)?;
+                format!(
+                    "<img src=\"captures/step{:02}_next_view_sigma.png\" height=160>",
+                    step.step
+                )
+            }
+            _ => String::new(),
+        };
         let _ = writeln!(
             rows,
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{:.2}</td><td>{:.2} mm / {:.2}°</td>\
              <td><img src=\"captures/step{:02}_left.png\" width=320></td>\
-             <td><img src=\"captures/step{:02}_depth.png\" width=320></td></tr>",
+             <td><img src=\"captures/step{:02}_depth.png\" width=320></td><td>{next_map}</td></tr>",
             step.step,
             step.view,
             step.total_points,
@@ -328,7 +378,7 @@ fn write_report(
          Errors are against the mock camera's ground truth (evaluation only: the session never reads it).</p>\
          <img src=\"session.png\"><h2>Steps</h2><pre>{table}</pre>\
          <table><tr><th>step</th><th>view</th><th>points</th><th>h predicted</th><th>h</th><th>error</th>\
-         <th>left pattern</th><th>depth</th></tr>{rows}</table></body></html>",
+         <th>left pattern</th><th>depth</th><th>next view: predicted σ̌_z (0–0.1 mm; red: eq 16, magenta: eq 17, orange: right camera blind)</th></tr>{rows}</table></body></html>",
         part = scene.object.name,
         policy = session.config.policy.name(),
         n = session.steps.len(),

@@ -22,6 +22,7 @@ use glint_calibration::response::ResponseTable;
 use glint_orchestrator::session::{SessionConfig, ViewPolicy};
 use glint_orchestrator::stages::{CameraStage, PredictionObject, RefineSettings, RefineSigma};
 use glint_uncertainty::CalibratedCamera;
+use glint_uncertainty::predict::PixelCause;
 use std::path::Path;
 
 /// How the demo's bin is made.
@@ -299,6 +300,45 @@ pub fn session_config(
 /// σ_z of the constant-σ policy's predictions: 0.5 mm, about the median σ_z eq 1–5 gives the
 /// default camera's depth on the parts at 0.5 m.
 pub const CONST_SIGMA_Z_M: f64 = 0.5e-3;
+
+/// Colours of the predicted-σ map's missing pixels, by cause: the ratio test (eq 16) red, the σ
+/// test (eq 17) magenta, not seen by the right camera orange, not the part black.
+pub const MISSING_RGB: [(PixelCause, [u8; 3]); 4] = [
+    (PixelCause::Ratio, [220, 40, 40]),
+    (PixelCause::Sigma, [230, 60, 230]),
+    (PixelCause::RightOccluded, [250, 150, 30]),
+    (PixelCause::NotPart, [0, 0, 0]),
+];
+
+/// Writes a candidate's predicted σ̌_z over its crop as `<stem>.exr` (channel `sigma_z_m`,
+/// metres, NaN off the part) and `<stem>.png` (kept pixels on the colour ramp from 0 to
+/// `scale_max_m`, missing ones in [`MISSING_RGB`] by cause). Needs a prediction made with
+/// maps.
+pub fn write_prediction_maps(
+    prediction: &glint_uncertainty::CandidatePrediction,
+    stem: &Path,
+    scale_max_m: f64,
+) -> anyhow::Result<()> {
+    let (Some(sigma), Some(cause)) = (&prediction.sigma_z_m, &prediction.cause) else {
+        anyhow::bail!("the prediction was made without maps");
+    };
+    glint_render::exr_io::write_exr(&stem.with_extension("exr"), &[("sigma_z_m", sigma)])?;
+    let rgb: Vec<u8> = sigma
+        .data()
+        .iter()
+        .zip(cause.data())
+        .flat_map(|(&s, &c)| {
+            MISSING_RGB
+                .iter()
+                .find(|(k, _)| *k as u8 == c)
+                .map(|(_, rgb)| *rgb)
+                .unwrap_or_else(|| glint_plot::ramp_rgb(f64::from(s) / scale_max_m))
+        })
+        .collect();
+    let png = glint_plot::encode_rgb_png(&rgb, sigma.width(), sigma.height())?;
+    glint_geometry::io::write_file_atomically(&stem.with_extension("png"), &png)?;
+    Ok(())
+}
 
 /// Each step's pose error against the truth (symmetry-aware), the initial guess first.
 pub fn deviations(
