@@ -1221,7 +1221,11 @@ mod tests {
         use glint_geometry::io::{PlyEncoding, write_ply_to_vec};
         let mesh = glint_geometry::Part::Zigzag.mesh();
         let good = v1::MeshFile {
-            data: write_ply_to_vec(&mesh, LengthUnit::Millimetre, PlyEncoding::BinaryLittleEndian),
+            data: write_ply_to_vec(
+                &mesh,
+                LengthUnit::Millimetre,
+                PlyEncoding::BinaryLittleEndian,
+            ),
             format: "ply".into(),
             unit: v1::LengthUnit::Millimetre as i32,
             name: "zigzag".into(),
