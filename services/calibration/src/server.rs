@@ -108,7 +108,7 @@ pub fn response_from_message(
     finite("forward_intensity", intensity)?;
     // g is read by interpolation on a uniform grid (`ResponseTable::intensity`).
     let step = (grid[grid.len() - 1] - grid[0]) / (grid.len() - 1) as f64;
-    if !(step > 0.0)
+    if step <= 0.0
         || grid
             .iter()
             .enumerate()

@@ -454,10 +454,19 @@ fn sigma_map_message(map: &Image<f32>) -> v1::Image {
     }
 }
 
-/// The decoded poses of a prediction request: `t_w_o` and `(index, t_w_c)` per candidate.
+/// The poses of a prediction request, validated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CandidatePoses {
+    /// The hypothesis, object → world.
+    pub t_w_o: Isometry3<f64>,
+    /// `(index, left camera → world)` per candidate, in the request's order.
+    pub candidates: Vec<(u32, Isometry3<f64>)>,
+}
+
+/// Decodes a prediction request's poses and candidate indices.
 pub fn decode_poses(
     request: &v1::PredictCandidatesRequest,
-) -> Result<(Isometry3<f64>, Vec<(u32, Isometry3<f64>)>), ConversionError> {
+) -> Result<CandidatePoses, ConversionError> {
     let t_w_o =
         Isometry3::try_from(required(&request.t_w_o, "t_w_o")?).map_err(|e| e.within("t_w_o"))?;
     let n = request.candidates_t_w_c.len();
@@ -497,7 +506,7 @@ pub fn decode_poses(
                 .map_err(|e| e.within(&format!("candidates_t_w_c[{i}]")))
         })
         .collect::<Result<_, _>>()?;
-    Ok((t_w_o, candidates))
+    Ok(CandidatePoses { t_w_o, candidates })
 }
 
 #[tonic::async_trait]
@@ -531,7 +540,7 @@ impl UncertaintyService for Uncertainty {
                  RegisterObject and send the request again"
             ))
         })?;
-        let (t_w_o, candidates) = decode_poses(&request)?;
+        let CandidatePoses { t_w_o, candidates } = decode_poses(&request)?;
         let settings = settings_of(
             request.settings.as_ref(),
             request.with_sigma_maps,
