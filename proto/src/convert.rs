@@ -14,6 +14,7 @@
 //! | `v1::Image`             | `glint_geometry::image::Image<u8/u16/f32>`  |
 //! | `v1::DepthMap`          | `glint_geometry::image::DepthMap`           |
 //! | `v1::LengthUnit`        | `glint_geometry::LengthUnit`                |
+//! | `v1::MeshFile`          | `glint_geometry::io::LoadedMesh` (one way)  |
 //!
 //! What is rejected: missing required sub-messages, NaN or infinite numbers (pose, intrinsics,
 //! baseline, float32 image samples, float32 depth other than the NaN "missing" marker),
@@ -25,6 +26,7 @@
 use glint_geometry::LengthUnit;
 use glint_geometry::camera::{CameraError, PinholeIntrinsics, StereoRig};
 use glint_geometry::image::{DepthMap, Image};
+use glint_geometry::io::{LoadedMesh, MeshFormat, read_mesh_from_bytes};
 use nalgebra::{Isometry3, Matrix6, Quaternion, Translation3, UnitQuaternion};
 
 use crate::v1;
@@ -692,6 +694,49 @@ impl v1::MeshRef {
     }
 }
 
+impl TryFrom<&v1::MeshFile> for LoadedMesh {
+    type Error = ConversionError;
+
+    /// Parses the inline file (PLY, OBJ or STL; an empty `format` is guessed from the bytes)
+    /// into metres, validated. A file that does not parse is rejected in `data`, naming where
+    /// in the file the problem is.
+    fn try_from(file: &v1::MeshFile) -> Result<Self, Self::Error> {
+        let format = if file.format.is_empty() {
+            MeshFormat::sniff(&file.data).ok_or_else(|| {
+                ConversionError::new(
+                    "format",
+                    "not given, and the data is not recognisably PLY, OBJ or STL",
+                )
+            })?
+        } else {
+            MeshFormat::from_extension(&file.format).ok_or_else(|| {
+                ConversionError::new(
+                    "format",
+                    format!("{:?} is not \"ply\", \"obj\" or \"stl\"", file.format),
+                )
+            })?
+        };
+        let unit: LengthUnit = known_enum::<v1::LengthUnit>("unit", file.unit)?.try_into()?;
+        if file.data.is_empty() {
+            return Err(ConversionError::new("data", "is empty"));
+        }
+        let name = if file.name.is_empty() {
+            "the mesh"
+        } else {
+            file.name.as_str()
+        };
+        read_mesh_from_bytes(&file.data, format, unit, name).map_err(|e| {
+            let mut message = e.to_string();
+            let mut source = std::error::Error::source(&e);
+            while let Some(cause) = source {
+                message.push_str(&format!(": {cause}"));
+                source = cause.source();
+            }
+            ConversionError::new("data", message)
+        })
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Information and covariance matrices
 
@@ -1169,6 +1214,53 @@ mod tests {
         assert_field(m.validate(), "unit", "must be set");
         let m = v1::MeshRef { unit: 7, ..mesh };
         assert_field(m.validate(), "unit", "unknown enum value 7");
+    }
+
+    #[test]
+    fn mesh_files_parse_and_name_their_problems() {
+        use glint_geometry::io::{PlyEncoding, write_ply_to_vec};
+        let mesh = glint_geometry::Part::Zigzag.mesh();
+        let good = v1::MeshFile {
+            data: write_ply_to_vec(
+                &mesh,
+                LengthUnit::Millimetre,
+                PlyEncoding::BinaryLittleEndian,
+            ),
+            format: "ply".into(),
+            unit: v1::LengthUnit::Millimetre as i32,
+            name: "zigzag".into(),
+        };
+        let loaded = LoadedMesh::try_from(&good).unwrap();
+        assert_eq!(loaded.mesh.triangles.len(), mesh.triangles.len());
+        let sniffed = v1::MeshFile {
+            format: String::new(),
+            ..good.clone()
+        };
+        assert_eq!(
+            LoadedMesh::try_from(&sniffed).unwrap().mesh.vertices,
+            loaded.mesh.vertices
+        );
+
+        let m = v1::MeshFile {
+            format: "step".into(),
+            ..good.clone()
+        };
+        assert_field(LoadedMesh::try_from(&m), "format", "\"step\"");
+        let m = v1::MeshFile {
+            unit: 0,
+            ..good.clone()
+        };
+        assert_field(LoadedMesh::try_from(&m), "unit", "must be set");
+        let m = v1::MeshFile {
+            data: good.data[..good.data.len() / 2].to_vec(),
+            ..good.clone()
+        };
+        assert_field(LoadedMesh::try_from(&m), "data", "zigzag");
+        let m = v1::MeshFile {
+            data: vec![],
+            ..good
+        };
+        assert_field(LoadedMesh::try_from(&m), "data", "empty");
     }
 
     // --- Errors

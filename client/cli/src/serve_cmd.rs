@@ -33,6 +33,8 @@ pub struct ServeArgs {
 pub enum Stage {
     /// `glint.v1.CalibrationService`: camera response (Debevec–Malik) from a streamed stack.
     Calibration,
+    /// `glint.v1.UncertaintyService`: a render worker (candidate-view prediction, eq 14–17).
+    Uncertainty,
 }
 
 #[derive(clap::Args)]
@@ -68,6 +70,12 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
             Stage::Calibration => (
                 tonic::service::Routes::new(glint_calibration::server::Calibration.into_service()),
                 vec![glint_calibration::server::SERVICE_NAME],
+            ),
+            Stage::Uncertainty => (
+                tonic::service::Routes::new(
+                    glint_uncertainty::server::Uncertainty::default().into_service(),
+                ),
+                vec![glint_uncertainty::server::SERVICE_NAME],
             ),
         };
         // The bound address on stdout, so a script that passed port 0 can read it.

@@ -12,7 +12,10 @@ use glint_proto::v1::calibration_service_server::{CalibrationService, Calibratio
 use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
 
-use crate::response::{DebevecConfig, ExposureStack, ResponseError, ResponseTable, calibrate};
+use crate::response::{
+    DebevecConfig, ExposureStack, ForwardTable, InverseTable, ResponseError, ResponseTable,
+    SolveInfo, calibrate,
+};
 
 /// The service's name, as health reports it.
 pub const SERVICE_NAME: &str = "glint.v1.CalibrationService";
@@ -38,6 +41,109 @@ pub fn response_to_message(table: &ResponseTable) -> v1::ResponseCurve {
         forward_ln_exposure: table.forward.ln_exposure.clone(),
         forward_intensity: table.forward.intensity.clone(),
     }
+}
+
+/// A response message as the table it describes, validated (the inverse of
+/// [`response_to_message`] but for the solve's provenance, which the message does not carry:
+/// it comes back zero). Rejections name the field.
+pub fn response_from_message(
+    msg: &v1::ResponseCurve,
+) -> Result<ResponseTable, glint_proto::ConversionError> {
+    use glint_proto::ConversionError as E;
+    let bit_depth = u8::try_from(msg.bit_depth)
+        .ok()
+        .filter(|b| (8..=16).contains(b))
+        .ok_or_else(|| {
+            E::new(
+                "bit_depth",
+                format!("is {}, but must be 8 to 16", msg.bit_depth),
+            )
+        })?;
+    let max_dn = crate::response::max_dn(bit_depth);
+    if msg.max_dn != u32::from(max_dn) {
+        return Err(E::new(
+            "max_dn",
+            format!("is {}, but {bit_depth} bits have {max_dn}", msg.max_dn),
+        ));
+    }
+    let levels = crate::response::debevec_levels(max_dn);
+    let finite =
+        |field: &'static str, values: &[f64]| match values.iter().position(|v| !v.is_finite()) {
+            Some(i) => Err(E::new(
+                field,
+                format!("value {i} is {}, not finite", values[i]),
+            )),
+            None => Ok(()),
+        };
+    for (field, values) in [
+        ("inverse_dn", &msg.inverse_dn),
+        ("inverse_ln_exposure", &msg.inverse_ln_exposure),
+    ] {
+        if values.len() != levels {
+            return Err(E::new(
+                field,
+                format!(
+                    "has {} values, but a {bit_depth}-bit response has {levels} levels",
+                    values.len()
+                ),
+            ));
+        }
+        finite(field, values)?;
+    }
+    let (grid, intensity) = (&msg.forward_ln_exposure, &msg.forward_intensity);
+    if grid.len() < 2 {
+        return Err(E::new("forward_ln_exposure", "needs at least 2 values"));
+    }
+    if intensity.len() != grid.len() {
+        return Err(E::new(
+            "forward_intensity",
+            format!(
+                "has {} values but forward_ln_exposure has {}",
+                intensity.len(),
+                grid.len()
+            ),
+        ));
+    }
+    finite("forward_ln_exposure", grid)?;
+    finite("forward_intensity", intensity)?;
+    // g is read by interpolation on a uniform grid (`ResponseTable::intensity`).
+    let step = (grid[grid.len() - 1] - grid[0]) / (grid.len() - 1) as f64;
+    if step <= 0.0
+        || grid
+            .iter()
+            .enumerate()
+            .any(|(k, x)| (x - (grid[0] + step * k as f64)).abs() > 1e-6 * step)
+    {
+        return Err(E::new(
+            "forward_ln_exposure",
+            "must be a uniform, increasing grid of ln X",
+        ));
+    }
+    if let Some(i) = intensity.iter().position(|v| !(0.0..=1.0).contains(v)) {
+        return Err(E::new(
+            "forward_intensity",
+            format!("value {i} is {}, outside [0, 1]", intensity[i]),
+        ));
+    }
+    Ok(ResponseTable {
+        format: crate::response::RESPONSE_FORMAT.to_owned(),
+        bit_depth,
+        max_dn,
+        inverse: InverseTable {
+            dn: msg.inverse_dn.clone(),
+            ln_exposure: msg.inverse_ln_exposure.clone(),
+        },
+        forward: ForwardTable {
+            ln_exposure: grid.clone(),
+            intensity: intensity.clone(),
+        },
+        solve: SolveInfo {
+            lambda: 0.0,
+            samples: 0,
+            exposures_s: Vec::new(),
+            rms_residual: 0.0,
+        },
+    })
 }
 
 fn status_of(e: ResponseError) -> Status {
@@ -149,5 +255,63 @@ impl CalibrationService for Calibration {
         Err(Status::unimplemented(
             "FitBsdf is not served yet: run `glint calibrate bsdf` on the capture",
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped() -> ResponseTable {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../assets/calibration/zigzag/response.json");
+        ResponseTable::load(&path).unwrap()
+    }
+
+    #[test]
+    fn response_messages_round_trip_and_name_bad_fields() {
+        let table = shipped();
+        let msg = response_to_message(&table);
+        let back = response_from_message(&msg).unwrap();
+        assert_eq!(back.inverse, table.inverse);
+        assert_eq!(back.forward, table.forward);
+        assert_eq!(
+            (back.bit_depth, back.max_dn),
+            (table.bit_depth, table.max_dn)
+        );
+        for v in [-0.5, 0.25, 1.0, 3.0] {
+            assert_eq!(back.intensity(v), table.intensity(v));
+        }
+
+        let field = |m: v1::ResponseCurve| response_from_message(&m).unwrap_err().field;
+        assert_eq!(
+            field(v1::ResponseCurve {
+                bit_depth: 4,
+                ..msg.clone()
+            }),
+            "bit_depth"
+        );
+        assert_eq!(
+            field(v1::ResponseCurve {
+                max_dn: 7,
+                ..msg.clone()
+            }),
+            "max_dn"
+        );
+        let mut m = msg.clone();
+        m.inverse_ln_exposure.pop();
+        assert_eq!(field(m), "inverse_ln_exposure");
+        let mut m = msg.clone();
+        m.inverse_dn[3] = f64::NAN;
+        assert_eq!(field(m), "inverse_dn");
+        let mut m = msg.clone();
+        m.forward_intensity.pop();
+        assert_eq!(field(m), "forward_intensity");
+        let mut m = msg.clone();
+        m.forward_ln_exposure[5] += 1.0;
+        assert_eq!(field(m), "forward_ln_exposure");
+        let mut m = msg;
+        m.forward_intensity[0] = 1.5;
+        assert_eq!(field(m), "forward_intensity");
     }
 }

@@ -8,12 +8,15 @@
 //! knows: never the simulator's ground truth.
 //!
 //! - [`response`]: the calibrated camera, radiance → intensity (eq 14);
-//! - [`predict`]: one candidate's prediction.
+//! - [`predict`]: one candidate's prediction;
+//! - `server` (feature `server`): the gRPC server `glint.v1.UncertaintyService` over them.
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
 
 pub mod predict;
 pub mod response;
+#[cfg(feature = "server")]
+pub mod server;
 
 pub use predict::{
     CandidatePrediction, KnownSurface, MissingCounts, PredictionError, PredictionSettings,

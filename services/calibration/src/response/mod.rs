@@ -81,6 +81,12 @@ pub struct ResponseComparison {
     pub levels: usize,
 }
 
+/// Levels of g⁻¹ of a response with `max_dn` full scale (one per DN, binned to at most
+/// [`MAX_LEVELS`]).
+pub fn debevec_levels(max_dn: u16) -> usize {
+    Levels::for_max_dn(max_dn).count
+}
+
 /// Points of the forward table.
 const FORWARD_POINTS: usize = 256;
 
