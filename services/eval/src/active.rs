@@ -563,4 +563,51 @@ mod tests {
             assert!(h.iter().flatten().all(|&x| x <= first.entropy_nats + 1e-9));
         }
     }
+
+    #[test]
+    fn prediction_maps_are_written_as_exr_and_png() {
+        let scene = small_scene();
+        let calibration = Calibration::embedded(Part::Zigzag).unwrap().unwrap();
+        let object = prediction_object(&scene, &calibration, true).unwrap();
+        let sdf = glint_orchestrator::local::SdfCache::default()
+            .grid(&object.object)
+            .unwrap();
+        let settings = glint_uncertainty::PredictionSettings {
+            with_maps: true,
+            ..Default::default()
+        };
+        let p = glint_uncertainty::predict_candidate(
+            &object.predictor(sdf),
+            &scene.gt_t_w_o,
+            &scene.candidates[1],
+            &settings,
+            1,
+        )
+        .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let stem = dir.path().join("map");
+        write_prediction_maps(&p, &stem, 0.1e-3).unwrap();
+        let sigma = p.sigma_z_m.as_ref().unwrap();
+        let channels = glint_render::exr_io::read_exr(&stem.with_extension("exr")).unwrap();
+        assert_eq!(channels[0].0, "sigma_z_m");
+        let read = &channels[0].1;
+        assert_eq!(
+            (read.width(), read.height()),
+            (sigma.width(), sigma.height())
+        );
+        assert!(
+            read.data()
+                .iter()
+                .zip(sigma.data())
+                .all(|(a, b)| a == b || (a.is_nan() && b.is_nan()))
+        );
+        let png = image::open(stem.with_extension("png")).unwrap();
+        assert_eq!((png.width(), png.height()), (sigma.width(), sigma.height()));
+        // Without maps there is nothing to write, and the error says so.
+        let bare = glint_uncertainty::CandidatePrediction {
+            sigma_z_m: None,
+            ..p
+        };
+        assert!(write_prediction_maps(&bare, &stem, 0.1e-3).is_err());
+    }
 }
