@@ -2,6 +2,7 @@
 //! chunks gives the same response as the library call; bad input answers INVALID_ARGUMENT
 //! naming the field; health reports SERVING, and NOT_SERVING once shutdown begins.
 
+use glint_e2e::TestServer;
 use std::time::Duration;
 
 use glint_calibration::response::{DebevecConfig, ExposureStack, calibrate};
@@ -12,7 +13,7 @@ use glint_geometry::Part;
 use glint_proto::chunks::{OutgoingArray, chunks};
 use glint_proto::v1;
 use glint_proto::v1::calibration_service_client::CalibrationServiceClient;
-use glint_server::{HealthStatus, ServeConfig};
+use glint_server::HealthStatus;
 use tokio_stream::StreamExt;
 use tonic_health::pb::HealthCheckRequest;
 use tonic_health::pb::health_client::HealthClient;
@@ -69,25 +70,12 @@ fn stream_of(
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn calibrate_response_over_grpc_matches_the_library() {
-    let listener = glint_server::bind("127.0.0.1:0").await.unwrap();
-    let target = format!("http://{}", listener.local_addr().unwrap());
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let server = tokio::spawn(glint_server::serve(
-        listener,
+    let server = TestServer::start(
         tonic::service::Routes::new(Calibration.into_service()),
-        ServeConfig {
-            services: vec![SERVICE_NAME],
-            drain_timeout: Duration::from_millis(300),
-        },
-        async {
-            let _ = stop_rx.await;
-        },
-    ));
-
-    let status = glint_server::healthcheck(&target, SERVICE_NAME, Duration::from_secs(5))
-        .await
-        .unwrap();
-    assert_eq!(status, HealthStatus::Serving);
+        SERVICE_NAME,
+    )
+    .await;
+    let target = server.target.clone();
 
     // Default client limits: every message of the stream is under 4 MiB.
     let mut client = CalibrationServiceClient::connect(target.clone())
@@ -166,14 +154,14 @@ async fn calibrate_response_over_grpc_matches_the_library() {
         .into_inner();
     let first = watch.next().await.unwrap().unwrap();
     assert_eq!(first.status(), HealthStatus::Serving);
-    stop_tx.send(()).unwrap();
+    let stopped = server.stop();
     let next = tokio::time::timeout(Duration::from_secs(5), watch.next())
         .await
         .expect("a status change within 5 s")
         .unwrap()
         .unwrap();
     assert_eq!(next.status(), HealthStatus::NotServing);
-    tokio::time::timeout(Duration::from_secs(5), server)
+    tokio::time::timeout(Duration::from_secs(5), stopped)
         .await
         .expect("the server stops within its drain bound")
         .unwrap()

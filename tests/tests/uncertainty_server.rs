@@ -4,9 +4,9 @@
 //! request answers the same. Bad input answers INVALID_ARGUMENT naming the field, an unknown
 //! object NOT_FOUND naming its hash.
 
+use glint_e2e::TestServer;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::Duration;
 
 use glint_calibration::material_file::MaterialFile;
 use glint_calibration::response::ResponseTable;
@@ -18,7 +18,6 @@ use glint_geometry::{LengthUnit, Part};
 use glint_proto::v1;
 use glint_proto::v1::uncertainty_service_client::UncertaintyServiceClient;
 use glint_render::rig::SliRig;
-use glint_server::{HealthStatus, ServeConfig};
 use glint_uncertainty::server::{
     SERVICE_NAME, Uncertainty, material_to_message, noise_to_message, rig_to_message,
 };
@@ -150,24 +149,12 @@ fn assert_invalid(status: &tonic::Status, field: &str) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn predict_candidates_over_grpc_matches_the_library() {
-    let listener = glint_server::bind("127.0.0.1:0").await.unwrap();
-    let target = format!("http://{}", listener.local_addr().unwrap());
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let server = tokio::spawn(glint_server::serve(
-        listener,
+    let server = TestServer::start(
         tonic::service::Routes::new(Uncertainty::default().into_service()),
-        ServeConfig {
-            services: vec![SERVICE_NAME],
-            drain_timeout: Duration::from_millis(300),
-        },
-        async {
-            let _ = stop_rx.await;
-        },
-    ));
-    let status = glint_server::healthcheck(&target, SERVICE_NAME, Duration::from_secs(5))
-        .await
-        .unwrap();
-    assert_eq!(status, HealthStatus::Serving);
+        SERVICE_NAME,
+    )
+    .await;
+    let target = server.target.clone();
     let mut client = UncertaintyServiceClient::connect(target).await.unwrap();
 
     let f = fixture();
@@ -332,6 +319,5 @@ async fn predict_candidates_over_grpc_matches_the_library() {
     let status = client.register_object(bad).await.unwrap_err();
     assert_invalid(&status, "rig.stereo.baseline_m");
 
-    let _ = stop_tx.send(());
-    server.await.unwrap().unwrap();
+    server.stop().await.unwrap().unwrap();
 }
