@@ -10,8 +10,8 @@ use std::time::Instant;
 use anyhow::Context;
 use glint_camera::record::to_8bit;
 use glint_eval::active::{
-    ActiveScene, ActiveSceneSpec, CONST_SIGMA_Z_M, Calibration, Masking, deviations,
-    prediction_object, session_config, set_up,
+    ActiveScene, ActiveSceneSpec, CONST_SIGMA_Z_M, Masking, deviations, prediction_object,
+    session_config, set_up,
 };
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::parts::Part;
@@ -33,19 +33,15 @@ pub struct DemoArgs {
     /// How the next view is chosen: nbv, nbv-const-sigma, random, max-distance.
     #[arg(long, default_value = "nbv")]
     pub policy: ViewPolicy,
-    /// The part's fitted material (`glint calibrate bsdf`), for the entropy policies' render
-    /// workers; the Zigzag has one embedded (assets/calibration/zigzag).
-    #[arg(long)]
-    pub material: Option<PathBuf>,
+    /// The calibration the entropy policies' render workers use.
+    #[command(flatten)]
+    pub calibration: crate::calibration_args::CalibrationArgs,
     /// The render workers render the bin with the part (occlusion by its walls,
     /// inter-reflection from its floor), beyond the paper: `false` renders the part alone,
     /// as the paper does. On the Zigzag the bin brings the predicted entropy within 0.3 nats
     /// of the one reached (1.4 nats optimistic without; `glint eval active`).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub predict_bin: bool,
-    /// The camera response (`glint calibrate response`) that goes with --material.
-    #[arg(long, requires = "material")]
-    pub response: Option<PathBuf>,
     /// Views at most (the first included).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub max_views: u32,
@@ -129,6 +125,12 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         samples_per_pixel: args.spp,
         candidates: args.candidates as usize,
     };
+    // The calibration first: a bad file fails before the bin is set up.
+    let calibration = if args.policy.prediction(CONST_SIGMA_Z_M).is_some() {
+        Some(args.calibration.load(args.part)?)
+    } else {
+        None
+    };
     let scene = set_up(&spec)?;
     let entropy_threshold_nats = entropy_of_sigmas(
         args.stop_sigma_mm_deg * 1e-3,
@@ -175,15 +177,9 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     );
     let estimation = LocalEstimation::default();
     let workers = LocalPrediction::default();
-    let prediction_object = if args.policy.prediction(CONST_SIGMA_Z_M).is_some() {
-        let calibration = Calibration::from_files_or_embedded(
-            args.part,
-            args.material.as_deref(),
-            args.response.as_deref(),
-        )?;
-        Some(prediction_object(&scene, &calibration, args.predict_bin)?)
-    } else {
-        None
+    let prediction_object = match &calibration {
+        Some(calibration) => Some(prediction_object(&scene, calibration, args.predict_bin)?),
+        None => None,
     };
     let stages = Stages {
         camera: &scene.camera,

@@ -4,6 +4,7 @@
 
 mod bench;
 mod calibrate_cmd;
+mod calibration_args;
 mod capture_cmd;
 mod demo;
 mod eval;

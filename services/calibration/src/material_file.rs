@@ -23,11 +23,11 @@ pub const MATERIAL_FORMAT: &str = "glint-material/1";
 /// Why a material file could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum MaterialFileError {
-    #[error("cannot read {}: {source}", path.display())]
+    // The reason is in the message, not a `source`: a chain printed whole would say it twice.
+    #[error("cannot read {}: {error}", path.display())]
     Read {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error(transparent)]
     Write(#[from] glint_geometry::io::AtomicWriteError),
@@ -164,9 +164,9 @@ fn validated(
 }
 
 fn read_text(path: &Path) -> Result<String, MaterialFileError> {
-    std::fs::read_to_string(path).map_err(|source| MaterialFileError::Read {
+    std::fs::read_to_string(path).map_err(|error| MaterialFileError::Read {
         path: path.into(),
-        source,
+        error,
     })
 }
 

@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use glint_eval::active::{Calibration, Masking};
+use glint_eval::active::Masking;
 use glint_eval::policies::{PolicyComparison, StepRow, run, summary_markdown};
 use glint_geometry::Part;
 use glint_geometry::io::write_file_atomically;
@@ -38,11 +38,8 @@ pub struct ActiveArgs {
     pub resolution: (u32, u32),
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub spp: u32,
-    /// The part's fitted material and camera response (default: the embedded calibration).
-    #[arg(long, requires = "response")]
-    pub material: Option<PathBuf>,
-    #[arg(long, requires = "material")]
-    pub response: Option<PathBuf>,
+    #[command(flatten)]
+    pub calibration: crate::calibration_args::CalibrationArgs,
     /// The render workers render the bin with the part (occlusion by its walls,
     /// inter-reflection from its floor), beyond the paper.
     #[arg(long)]
@@ -56,11 +53,7 @@ pub fn run_cmd(args: &ActiveArgs) -> anyhow::Result<()> {
         .with_context(|| format!("creating {}", args.out.display()))?;
     let needs = args.policies.iter().any(|p| p.prediction(1e-3).is_some());
     let calibration = if needs {
-        Some(Calibration::from_files_or_embedded(
-            args.part,
-            args.material.as_deref(),
-            args.response.as_deref(),
-        )?)
+        Some(args.calibration.load(args.part)?)
     } else {
         None
     };

@@ -5,7 +5,6 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use glint_eval::active::Calibration;
 use glint_eval::prediction::{PredictionStudy, grid_markdown, run};
 use glint_geometry::Part;
 use glint_geometry::io::write_file_atomically;
@@ -34,10 +33,8 @@ pub struct PredictionArgs {
     /// Capture depth within this of the true surface counts as usable, mm.
     #[arg(long, default_value_t = 1.0)]
     pub good_depth_mm: f64,
-    #[arg(long, requires = "response")]
-    pub material: Option<PathBuf>,
-    #[arg(long, requires = "material")]
-    pub response: Option<PathBuf>,
+    #[command(flatten)]
+    pub calibration: crate::calibration_args::CalibrationArgs,
     /// Render the bin with the part.
     #[arg(long)]
     pub predict_bin: bool,
@@ -61,11 +58,7 @@ pub fn run_cmd(args: &PredictionArgs) -> anyhow::Result<()> {
     );
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let calibration = Calibration::from_files_or_embedded(
-        args.part,
-        args.material.as_deref(),
-        args.response.as_deref(),
-    )?;
+    let calibration = args.calibration.load(args.part)?;
     let study = PredictionStudy {
         part: args.part,
         seeds: args.seeds.clone(),
