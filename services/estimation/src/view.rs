@@ -127,14 +127,15 @@ pub fn noise_model_of(view: &ViewMeasurement) -> Result<NoiseModel, ViewError> {
     )?)
 }
 
-/// The part's depth points of one view (world frame, with σ_z; eq 1–7): the pixels of `mask`
-/// whose `(2·erode_px + 1)²` window lies inside it, with depth and a usable σ_z.
-pub fn view_points(
-    view: &ViewMeasurement,
-    mask: &Image<bool>,
-    sigma: &SigmaSource,
-    erode_px: u32,
-) -> Result<ViewPoints, ViewError> {
+/// A view's σ_z per pixel (eq 1–5) or one σ_z for all: it depends on the view alone, not on
+/// the pose hypothesis, so a caller that masks the view more than once computes it once.
+#[derive(Clone, Debug)]
+pub enum ViewSigma {
+    PerPixel(Image<f32>),
+    Constant(f64),
+}
+
+fn check_size(view: &ViewMeasurement) -> Result<(u32, u32), ViewError> {
     let (w, h) = (view.depth.depth_m.width(), view.depth.depth_m.height());
     let intrinsics = &view.stereo.intrinsics;
     if (w, h) != (intrinsics.width_px, intrinsics.height_px) {
@@ -146,20 +147,13 @@ pub fn view_points(
             ),
         ));
     }
-    if (mask.width(), mask.height()) != (w, h) {
-        return Err(input(
-            "mask",
-            format!(
-                "is {}×{} px but the depth is {w}×{h} px",
-                mask.width(),
-                mask.height()
-            ),
-        ));
-    }
-    let interior = interior_mask(w, h, erode_px, |u, v| mask.get(u, v).unwrap_or(false));
-    let inside = |u: u32, v: u32| interior.get(u, v).unwrap_or(false);
-    let mut points = Vec::new();
-    let counts = match sigma {
+    Ok((w, h))
+}
+
+/// σ_z of `view`'s depth pixels from `sigma`.
+pub fn view_sigma(view: &ViewMeasurement, sigma: &SigmaSource) -> Result<ViewSigma, ViewError> {
+    check_size(view)?;
+    match sigma {
         SigmaSource::Constant { sigma_z_m } => {
             if !(sigma_z_m.is_finite() && *sigma_z_m > 0.0) {
                 return Err(input(
@@ -167,14 +161,7 @@ pub fn view_points(
                     format!("is {sigma_z_m}; a depth σ must be finite and positive (metres)"),
                 ));
             }
-            object_points(
-                &view.depth,
-                inside,
-                DepthSigma::Constant(*sigma_z_m),
-                intrinsics,
-                &view.t_w_c,
-                &mut points,
-            )
+            Ok(ViewSigma::Constant(*sigma_z_m))
         }
         SigmaSource::PatternImages {
             window_radius_px,
@@ -190,24 +177,74 @@ pub fn view_points(
                     .map(|s| normalised_intensity(s, view.max_dn))
                     .collect()
             };
-            let sigma_image = depth_sigma(
+            Ok(ViewSigma::PerPixel(depth_sigma(
                 &normalised(&view.left),
                 &normalised(&view.right),
                 &view.depth,
                 &view.stereo,
                 &noise,
                 *window_radius_px,
-            )?;
-            object_points(
-                &view.depth,
-                inside,
-                DepthSigma::PerPixel(&sigma_image),
-                intrinsics,
-                &view.t_w_c,
-                &mut points,
-            )
+            )?))
         }
+    }
+}
+
+/// The part's depth points of one view (world frame, with σ_z; eq 1–7): the pixels of `mask`
+/// whose `(2·erode_px + 1)²` window lies inside it, with depth and a usable σ_z.
+pub fn view_points(
+    view: &ViewMeasurement,
+    mask: &Image<bool>,
+    sigma: &SigmaSource,
+    erode_px: u32,
+) -> Result<ViewPoints, ViewError> {
+    points_in_mask(view, mask, &view_sigma(view, sigma)?, erode_px)
+}
+
+/// [`view_points`] with the view's σ_z already computed ([`view_sigma`]).
+pub fn points_in_mask(
+    view: &ViewMeasurement,
+    mask: &Image<bool>,
+    sigma: &ViewSigma,
+    erode_px: u32,
+) -> Result<ViewPoints, ViewError> {
+    let (w, h) = check_size(view)?;
+    if (mask.width(), mask.height()) != (w, h) {
+        return Err(input(
+            "mask",
+            format!(
+                "is {}×{} px but the depth is {w}×{h} px",
+                mask.width(),
+                mask.height()
+            ),
+        ));
+    }
+    let interior = interior_mask(w, h, erode_px, |u, v| mask.get(u, v).unwrap_or(false));
+    let inside = |u: u32, v: u32| interior.get(u, v).unwrap_or(false);
+    let depth_sigma = match sigma {
+        ViewSigma::PerPixel(image) => {
+            if (image.width(), image.height()) != (w, h) {
+                return Err(input(
+                    "sigma",
+                    format!(
+                        "is {}×{} px but the depth is {w}×{h} px",
+                        image.width(),
+                        image.height()
+                    ),
+                ));
+            }
+            DepthSigma::PerPixel(image)
+        }
+        ViewSigma::Constant(s) => DepthSigma::Constant(*s),
     };
+    let mut points = Vec::new();
+    let counts = object_points(
+        &view.depth,
+        inside,
+        depth_sigma,
+        &view.stereo.intrinsics,
+        &view.t_w_c,
+        &mut points,
+    );
     Ok(ViewPoints { points, counts })
 }
 

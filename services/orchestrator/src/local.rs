@@ -9,7 +9,8 @@ use glint_camera::setup::BinSetup;
 use glint_estimation::nbv::{PosePrior, plan_next_view, pose_entropy_nats};
 use glint_estimation::refine::{SdfRefineConfig, refine_sdf};
 use glint_estimation::view::{
-    SigmaSource, ViewMeasurement, ViewPoints, hypothesis_mask, view_points,
+    SigmaSource, ViewError, ViewMeasurement, ViewPoints, ViewSigma, hypothesis_mask,
+    points_in_mask, view_sigma,
 };
 use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use nalgebra::{Isometry3, Matrix6};
@@ -181,15 +182,18 @@ impl PredictionStage for LocalPrediction {
     }
 }
 
-/// A view's part points in the silhouette of the hypothesis `t_w_o` grown by `margin_m`.
-pub fn points_of_view(
-    object: &SessionObject,
+fn stage_error(e: ViewError) -> StageError {
+    match e {
+        ViewError::Input { field, message } => StageError::invalid(field, message),
+        other => StageError::FailedPrecondition(other.to_string()),
+    }
+}
+
+/// A view's σ_z as `settings` asks for it (eq 1–5 from its pattern images, or constant).
+pub fn sigma_of_view(
     view: &ViewMeasurement,
-    t_w_o: &Isometry3<f64>,
-    margin_m: f64,
     settings: &RefineSettings,
-) -> Result<ViewPoints, StageError> {
-    let mask = hypothesis_mask(&object.mesh, &view.stereo, &view.t_w_c, t_w_o, margin_m);
+) -> Result<ViewSigma, StageError> {
     let sigma = match settings.sigma {
         RefineSigma::PatternImages => SigmaSource::PatternImages {
             window_radius_px: settings.window_radius_px,
@@ -197,12 +201,25 @@ pub fn points_of_view(
         },
         RefineSigma::Constant { sigma_z_m } => SigmaSource::Constant { sigma_z_m },
     };
-    view_points(view, &mask, &sigma, settings.erode_px).map_err(|e| match e {
-        glint_estimation::view::ViewError::Input { field, message } => {
-            StageError::invalid(field, message)
-        }
-        other => StageError::FailedPrecondition(other.to_string()),
-    })
+    view_sigma(view, &sigma).map_err(stage_error)
+}
+
+/// A view's part points in the silhouette of the hypothesis `t_w_o` grown by `margin_m`,
+/// without the known background, with the view's σ_z `sigma`.
+pub fn points_of_view(
+    object: &SessionObject,
+    view: &ViewMeasurement,
+    sigma: &ViewSigma,
+    t_w_o: &Isometry3<f64>,
+    margin_m: f64,
+    settings: &RefineSettings,
+) -> Result<ViewPoints, StageError> {
+    let mask = hypothesis_mask(&object.mesh, &view.stereo, &view.t_w_c, t_w_o, margin_m);
+    let mut points = points_in_mask(view, &mask, sigma, settings.erode_px).map_err(stage_error)?;
+    if let Some(background) = &settings.background {
+        points.drop_background(background);
+    }
+    Ok(points)
 }
 
 impl EstimationStage for LocalEstimation {
@@ -215,16 +232,17 @@ impl EstimationStage for LocalEstimation {
     ) -> Result<Refinement, StageError> {
         let started = Instant::now();
         let grid = self.grids.grid(object)?;
+        // σ_z once per view: both masking passes use it.
+        let sigmas: Vec<ViewSigma> = views
+            .par_iter()
+            .map(|v| sigma_of_view(&v.measurement, settings))
+            .collect::<Result<_, _>>()?;
         let points_at = |t_w_o: &Isometry3<f64>, margin_m: f64| {
             let per_view: Vec<ViewPoints> = views
                 .par_iter()
-                .map(|v| {
-                    let mut points =
-                        points_of_view(object, &v.measurement, t_w_o, margin_m, settings)?;
-                    if let Some(background) = &settings.background {
-                        points.drop_background(background);
-                    }
-                    Ok(points)
+                .zip(&sigmas)
+                .map(|(v, sigma)| {
+                    points_of_view(object, &v.measurement, sigma, t_w_o, margin_m, settings)
                 })
                 .collect::<Result<_, StageError>>()?;
             let counts: Vec<usize> = per_view.iter().map(|v| v.points.len()).collect();
