@@ -7,5 +7,7 @@
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
 
 pub mod local;
+#[cfg(feature = "server")]
+pub mod remote;
 pub mod session;
 pub mod stages;

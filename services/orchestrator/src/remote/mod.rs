@@ -1,0 +1,108 @@
+//! The stages over gRPC: each implements its [`crate::stages`] trait by calling a stage's
+//! server, so [`crate::session::run`] drives a deployment exactly as it drives the libraries.
+//!
+//! The traits are synchronous (a session runs on a blocking thread); these implementations
+//! hold a tokio runtime [`Handle`] and block on their calls. Never call them from inside an
+//! async task: run the session with `tokio::task::spawn_blocking` (or on a plain thread).
+
+use std::future::Future;
+use std::time::Duration;
+
+use tokio::runtime::Handle;
+use tonic::Code;
+
+use crate::stages::StageError;
+
+/// A stage's server address and how long its calls may take.
+#[derive(Clone, Debug)]
+pub struct Endpoint {
+    /// `http://host:port` (a bare `host:port` gets `http://`).
+    pub uri: String,
+    /// Deadline of every call, sent as `grpc-timeout` so the server stops working on it too.
+    pub deadline: Duration,
+}
+
+impl Endpoint {
+    pub fn new(uri: &str, deadline: Duration) -> Self {
+        let uri = if uri.contains("://") {
+            uri.to_owned()
+        } else {
+            format!("http://{uri}")
+        };
+        Self { uri, deadline }
+    }
+
+    /// A lazily connecting channel: the first call connects, a dropped connection reconnects.
+    pub fn channel(&self) -> Result<tonic::transport::Channel, StageError> {
+        Ok(tonic::transport::Endpoint::from_shared(self.uri.clone())
+            .map_err(|e| StageError::invalid("endpoint", format!("{}: {e}", self.uri)))?
+            .connect_timeout(self.deadline.min(Duration::from_secs(5)))
+            .tcp_nodelay(true)
+            .connect_lazy())
+    }
+}
+
+/// Blocks the calling (non-async) thread on `future` with `handle`'s runtime.
+pub fn block_on<F: Future>(handle: &Handle, future: F) -> F::Output {
+    handle.block_on(future)
+}
+
+/// A request with `deadline` set (propagated to the server as `grpc-timeout`).
+pub fn request<T>(message: T, deadline: Duration) -> tonic::Request<T> {
+    let mut request = tonic::Request::new(message);
+    request.set_timeout(deadline);
+    request
+}
+
+/// What a failed call means to a session. INVALID_ARGUMENT messages start with the field
+/// (`field: message`, as every Glint server writes them).
+pub fn stage_error(status: &tonic::Status) -> StageError {
+    let message = status.message().to_owned();
+    match status.code() {
+        Code::InvalidArgument => match message.split_once(": ") {
+            Some((field, rest)) if !field.contains(' ') => StageError::invalid(field, rest),
+            _ => StageError::invalid("request", message),
+        },
+        Code::NotFound => StageError::NotFound(message),
+        Code::FailedPrecondition | Code::OutOfRange => StageError::FailedPrecondition(message),
+        Code::Unavailable | Code::DeadlineExceeded | Code::ResourceExhausted | Code::Aborted => {
+            StageError::Unavailable(format!("{}: {message}", status.code()))
+        }
+        Code::Cancelled => StageError::Cancelled,
+        _ => StageError::Internal(format!("{}: {message}", status.code())),
+    }
+}
+
+/// The status a server answers for a stage's error (the inverse of [`stage_error`]).
+pub fn status_of(error: &StageError) -> tonic::Status {
+    match error {
+        StageError::InvalidArgument { .. } => tonic::Status::invalid_argument(error.to_string()),
+        StageError::NotFound(m) => tonic::Status::not_found(m.clone()),
+        StageError::FailedPrecondition(m) => tonic::Status::failed_precondition(m.clone()),
+        StageError::Unavailable(m) => tonic::Status::unavailable(m.clone()),
+        StageError::Cancelled => tonic::Status::cancelled("cancelled"),
+        StageError::Internal(m) => tonic::Status::internal(m.clone()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn statuses_round_trip_through_stage_errors() {
+        let errors = [
+            StageError::invalid("t_w_c.rotation", "norm is 2, not 1"),
+            StageError::NotFound("object abc".into()),
+            StageError::FailedPrecondition("too few points".into()),
+            StageError::Cancelled,
+        ];
+        for e in errors {
+            assert_eq!(stage_error(&status_of(&e)), e);
+        }
+        assert!(matches!(
+            stage_error(&tonic::Status::deadline_exceeded("slow")),
+            StageError::Unavailable(_)
+        ));
+    }
+}
