@@ -19,10 +19,10 @@ pub struct CalibrationArgs {
 
 impl CalibrationArgs {
     pub fn load(&self, part: Part) -> anyhow::Result<Calibration> {
-        Calibration::from_files_or_embedded(
+        Ok(Calibration::from_files_or_embedded(
             part,
             self.material.as_deref(),
             self.response.as_deref(),
-        )
+        )?)
     }
 }

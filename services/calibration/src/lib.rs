@@ -14,3 +14,4 @@ pub mod material_map;
 pub mod response;
 #[cfg(feature = "server")]
 pub mod server;
+pub mod shipped;

@@ -17,11 +17,8 @@ use nalgebra::Isometry3;
 use rand::SeedableRng;
 
 use crate::metrics::InitialPoseNoise;
-use glint_calibration::material_file::MaterialFile;
-use glint_calibration::response::ResponseTable;
-use glint_orchestrator::session::{SessionConfig, ViewPolicy};
-use glint_orchestrator::stages::{CameraStage, PredictionObject, RefineSettings, RefineSigma};
-use glint_uncertainty::CalibratedCamera;
+use glint_orchestrator::session::{Cell, SessionConfig, ViewPolicy};
+use glint_orchestrator::stages::{CameraStage, PartCalibration, PredictionObject, calibrate_noise};
 use glint_uncertainty::predict::PixelCause;
 use std::path::Path;
 
@@ -79,22 +76,22 @@ pub fn set_up(spec: &ActiveSceneSpec) -> anyhow::Result<ActiveScene> {
     let first_view = 0;
     let [left, _] = setup.rig.cameras(&candidates[first_view]);
     let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
-    let visibility = instance_visibility(&setup.scene, &left, &labels);
-    let (target, target_visib_fract) = visibility
+    let visibility: Vec<(f64, f64)> = instance_visibility(&setup.scene, &left, &labels)
         .iter()
-        .enumerate()
-        .map(|(i, v)| (i, v.visib_fract * v.px_count_all as f64, v.visib_fract))
-        .max_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|(i, _, f)| (i, f))
-        .context("the bin holds no instance")?;
-    let gt_t_w_o = setup.poses[target];
+        .map(|v| (v.visib_fract, v.px_count_all as f64))
+        .collect();
     let symmetry = spec.part.symmetry();
-    // The detector's error lives in its camera's frame (lateral vs depth).
-    let t_w_c = candidates[first_view];
-    let mut rng = rand_pcg::Pcg64::seed_from_u64(spec.seed ^ 0xDE7E_C70B);
-    let t_c_o =
-        InitialPoseNoise::default().draw(&(t_w_c.inverse() * gt_t_w_o), &symmetry, &mut rng);
-    let initial_t_w_o = t_w_c * t_c_o;
+    let guess = stand_in_detector(
+        &setup.poses,
+        &visibility,
+        &candidates[first_view],
+        &symmetry,
+        spec.seed,
+    )
+    .context("the bin holds no instance")?;
+    let (target, target_visib_fract, initial_t_w_o) =
+        (guess.target, guess.visib_fract, guess.initial_t_w_o);
+    let gt_t_w_o = setup.poses[target];
     let object = SessionObject {
         name: spec.part.name().to_string(),
         mesh_sha256_hex: mesh.content_sha256_hex(),
@@ -113,6 +110,47 @@ pub fn set_up(spec: &ActiveSceneSpec) -> anyhow::Result<ActiveScene> {
     })
 }
 
+/// What the stand-in detector reports.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DetectorGuess {
+    /// The instance it detected: the most visible one (most visible pixels) from its view.
+    pub target: usize,
+    /// Share of that instance's silhouette visible from the view.
+    pub visib_fract: f64,
+    /// Its pose guess, object → world: the truth perturbed in the view's camera frame as
+    /// `glint eval refine` perturbs it ([`InitialPoseNoise`], within 30 mm/30°).
+    pub initial_t_w_o: Isometry3<f64>,
+}
+
+/// A stand-in for a real detector, for the demo and the tests (it reads ground truth, so
+/// evaluation code only): given every instance's true pose and `(visible fraction, silhouette
+/// pixels)` from the view `t_w_c`, it picks the most visible instance and guesses its pose
+/// with a detector's error, seeded by `seed`. `None` for an empty bin.
+pub fn stand_in_detector(
+    gt_t_w_o: &[Isometry3<f64>],
+    visibility: &[(f64, f64)],
+    t_w_c: &Isometry3<f64>,
+    symmetry: &Symmetry,
+    seed: u64,
+) -> Option<DetectorGuess> {
+    let (target, visib_fract) = visibility
+        .iter()
+        .enumerate()
+        .take(gt_t_w_o.len())
+        .map(|(i, &(fract, all_px))| (i, fract * all_px, fract))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _, f)| (i, f))?;
+    // The detector's error lives in its camera's frame (lateral vs depth).
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed ^ 0xDE7E_C70B);
+    let t_c_o =
+        InitialPoseNoise::default().draw(&(t_w_c.inverse() * gt_t_w_o[target]), symmetry, &mut rng);
+    Some(DetectorGuess {
+        target,
+        visib_fract,
+        initial_t_w_o: t_w_c * t_c_o,
+    })
+}
+
 impl ActiveScene {
     /// The bin's floor (world z = 0, parts above) as the cell's calibration knows it, with
     /// `clearance_m`.
@@ -125,58 +163,7 @@ impl ActiveScene {
     }
 }
 
-/// The calibration a session's render workers use: what `glint calibrate bsdf` and
-/// `glint calibrate response` wrote.
-#[derive(Clone, Debug)]
-pub struct Calibration {
-    pub material: MaterialFile,
-    pub response: ResponseTable,
-}
-
-const ZIGZAG_MATERIAL: &str = include_str!("../../../assets/calibration/zigzag/material.json");
-const ZIGZAG_RESPONSE: &str = include_str!("../../../assets/calibration/zigzag/response.json");
-
-impl Calibration {
-    pub fn load(material: &Path, response: &Path) -> anyhow::Result<Self> {
-        Ok(Self {
-            material: MaterialFile::load(material)?,
-            response: ResponseTable::load(response)?,
-        })
-    }
-
-    /// From `--material`/`--response` files when given (both), else the calibration shipped
-    /// for `part`; the error says how to provide one.
-    pub fn from_files_or_embedded(
-        part: Part,
-        material: Option<&Path>,
-        response: Option<&Path>,
-    ) -> anyhow::Result<Self> {
-        match (material, response) {
-            (Some(m), Some(r)) => Self::load(m, r),
-            (None, None) => Self::embedded(part).with_context(|| {
-                format!(
-                    "rendering the {} needs its calibrated material and response: only the \
-                     Zigzag's are embedded; pass --material and --response (from glint \
-                     calibrate bsdf and glint calibrate response)",
-                    part.display_name()
-                )
-            })?,
-            _ => anyhow::bail!("--material and --response go together"),
-        }
-    }
-
-    /// The calibration shipped with Glint for `part` (assets/calibration/, made by the commands
-    /// in its README), if there is one: today the Zigzag's.
-    pub fn embedded(part: Part) -> Option<anyhow::Result<Self>> {
-        (part == Part::Zigzag).then(|| {
-            let origin = Path::new("assets/calibration/zigzag");
-            Ok(Self {
-                material: MaterialFile::parse(ZIGZAG_MATERIAL, &origin.join("material.json"))?,
-                response: ResponseTable::parse(ZIGZAG_RESPONSE, &origin.join("response.json"))?,
-            })
-        })
-    }
-}
+pub use glint_calibration::shipped::Calibration;
 
 /// What the render workers know of `scene`'s part and camera: the calibrated material,
 /// response and radiometric scale, the rig, the camera's shots and window, and the sensor's
@@ -188,7 +175,7 @@ pub fn prediction_object(
     with_bin: bool,
 ) -> anyhow::Result<PredictionObject> {
     prediction_object_for(
-        &scene.camera.setup,
+        &scene.camera,
         &scene.candidates[scene.first_view],
         &scene.object,
         calibration,
@@ -200,71 +187,28 @@ pub fn prediction_object(
 /// `with_bin` the workers render the bin too (its geometry and its reference material, which
 /// the cell's calibration knows), beyond the paper.
 pub fn prediction_object_for(
-    setup: &BinSetup,
+    camera: &MockCamera,
     noise_t_w_c: &Isometry3<f64>,
     object: &SessionObject,
     calibration: &Calibration,
     with_bin: bool,
 ) -> anyhow::Result<PredictionObject> {
-    let scale = calibration.material.radiometric_scale().context(
-        "the material file's provenance has no per_view[].radiometric_scale: refit it with \
-         glint calibrate bsdf",
-    )?;
-    // The pattern captures' exposure time is a camera setting, known to the system.
-    let exposure_s = f64::from(setup.config.sensor.exposure_s);
-    let camera = CalibratedCamera::new(calibration.response.clone(), scale, exposure_s)?;
-    // A noise calibration of its own (two read-outs of one shot), seeded apart from captures.
-    let mock = setup.camera();
-    let rendered = mock.render_shots(noise_t_w_c, 0x4015E);
-    let [a, b] = mock
-        .noise_shots(&rendered, 0x4015E)
-        .context("the camera took no shot")?;
-    let max_dn = setup.config.sensor.max_dn();
-    let noise = glint_estimation::depth_sigma::NoiseModel::fit_from_pair(
-        &glint_geometry::image::normalised_intensity(&a, max_dn),
-        &glint_geometry::image::normalised_intensity(&b, max_dn),
-        max_dn,
-    )?;
-    Ok(PredictionObject {
-        object: object.clone(),
-        material: calibration.material.params()?,
-        camera,
-        rig: setup.rig,
+    let noise = calibrate_noise(camera, noise_t_w_c)?;
+    let surroundings = if with_bin {
+        Cell::standard_bin().surroundings
+    } else {
+        Vec::new()
+    };
+    Ok(PredictionObject::calibrated(
+        object.clone(),
+        &PartCalibration::from_files(calibration)?,
+        &camera.info()?,
         noise,
-        surroundings: if with_bin {
-            vec![glint_uncertainty::KnownSurface {
-                mesh: Arc::new(setup.bin.mesh()),
-                t_w_s: Isometry3::identity(),
-                material: glint_camera::materials::bin(),
-            }]
-        } else {
-            Vec::new()
-        },
-        shots: setup.config.shots,
-        window_radius_px: setup.config.matcher.window_radius_px,
-    })
+        surroundings,
+    )?)
 }
 
-/// How the part's pixels are found in each view, as the demo and the experiments do it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Masking {
-    /// The hypothesis silhouette's margin, then the second pass's, metres.
-    pub margin_m: f64,
-    pub final_margin_m: f64,
-    /// Points this close to the bin's floor are dropped, metres.
-    pub floor_clearance_m: f64,
-}
-
-impl Default for Masking {
-    /// 10 mm (the detector's error), then 3 mm, and 2 mm above the floor.
-    fn default() -> Self {
-        Self {
-            margin_m: 10e-3,
-            final_margin_m: 3e-3,
-            floor_clearance_m: 2e-3,
-        }
-    }
-}
+pub use glint_orchestrator::session::{CONST_SIGMA_Z_M, Masking};
 
 /// A session on `scene` with `policy`: from the stand-in detector's pose, σ_z from the pattern
 /// images, the part's pixels by `masking`.
@@ -285,21 +229,10 @@ pub fn session_config(
         max_views,
         entropy_threshold_nats,
         seed,
-        refine: RefineSettings {
-            mask_margin_m: masking.margin_m,
-            final_mask_margin_m: Some(masking.final_margin_m),
-            background: Some(scene.background(masking.floor_clearance_m)),
-            erode_px: info.window_radius_px,
-            window_radius_px: info.window_radius_px,
-            sigma: RefineSigma::PatternImages,
-        },
+        refine: masking.refine_settings(&info, Some(&Cell::standard_bin())),
         const_sigma_z_m: CONST_SIGMA_Z_M,
     })
 }
-
-/// σ_z of the constant-σ policy's predictions: 0.5 mm, about the median σ_z eq 1–5 gives the
-/// default camera's depth on the parts at 0.5 m.
-pub const CONST_SIGMA_Z_M: f64 = 0.5e-3;
 
 /// Colours of the predicted-σ map's missing pixels, by cause: the ratio test (eq 16) red, the σ
 /// test (eq 17) magenta, not seen by the right camera orange, not the part black.

@@ -19,6 +19,7 @@ use glint_uncertainty::{PredictionSettings, predict_candidate};
 use std::sync::Arc;
 
 use crate::active::{Calibration, prediction_object_for};
+use glint_orchestrator::local::MockCamera;
 
 /// What to measure.
 #[derive(Clone, Debug)]
@@ -124,10 +125,12 @@ pub fn run(
                 samples_per_pixel: study.samples_per_pixel,
             },
         )?;
+        let mock = MockCamera { setup };
+        let setup = &mock.setup;
         let camera = setup.camera();
         let views = setup.views(study.views);
         let calibrated =
-            prediction_object_for(&setup, &views[0], &object, calibration, study.with_bin)?;
+            prediction_object_for(&mock, &views[0], &object, calibration, study.with_bin)?;
         let predictor = calibrated.predictor(sdf.clone());
         for (k, t_w_c) in views.iter().enumerate() {
             let view_seed = glint_camera::setup::capture_seed(seed, k);

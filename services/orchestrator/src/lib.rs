@@ -9,5 +9,8 @@
 pub mod local;
 #[cfg(feature = "server")]
 pub mod remote;
+#[cfg(feature = "server")]
+pub mod server;
+pub mod service;
 pub mod session;
 pub mod stages;

@@ -39,7 +39,19 @@ impl CameraStage for MockCamera {
             max_dn: config.sensor.max_dn(),
             shots: config.shots,
             window_radius_px: config.matcher.window_radius_px,
+            exposure_s: f64::from(config.sensor.exposure_s),
+            pattern_fill: config.pattern_fill,
         })
+    }
+
+    fn candidate_views(&self, count: usize) -> Result<Vec<Isometry3<f64>>, StageError> {
+        if !(1..=1000).contains(&count) {
+            return Err(StageError::invalid(
+                "count",
+                format!("is {count}; 1 to 1000 views"),
+            ));
+        }
+        Ok(self.setup.views(count))
     }
 
     fn capture(&self, t_w_c: &Isometry3<f64>, seed: u64) -> Result<CapturedView, StageError> {
@@ -140,6 +152,7 @@ impl PredictionStage for LocalPrediction {
                 PredictionSigma::Constant { sigma_z_m } => SigmaModel::Constant { sigma_z_m },
             },
             shots: object.shots,
+            pattern_fill: object.pattern_fill,
             window_radius_px: object.window_radius_px,
             with_maps: request.with_maps,
             ..self.settings

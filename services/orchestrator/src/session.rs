@@ -9,8 +9,8 @@ use std::time::Instant;
 use nalgebra::{Isometry3, Matrix6};
 
 use crate::stages::{
-    CameraStage, CapturedView, EstimationStage, PredictionObject, PredictionRequest,
-    PredictionSigma, PredictionStage, RefineSettings, StageError,
+    CameraInfo, CameraStage, CapturedView, EstimationStage, PredictionObject, PredictionRequest,
+    PredictionSigma, PredictionStage, RefineSettings, RefineSigma, StageError,
 };
 
 /// How the next view is chosen.
@@ -87,6 +87,88 @@ pub struct SessionConfig {
     pub refine: RefineSettings,
     /// σ_z of the constant-σ policy's predictions, metres.
     pub const_sigma_z_m: f64,
+}
+
+/// How the part's pixels are found in each view, as the demo, the experiments and the
+/// orchestrator's sessions do it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Masking {
+    /// The hypothesis silhouette's margin, then the second pass's, metres.
+    pub margin_m: f64,
+    pub final_margin_m: f64,
+    /// Points this close to the cell's known floor are dropped, metres.
+    pub floor_clearance_m: f64,
+}
+
+impl Default for Masking {
+    /// 10 mm (the detector's error), then 3 mm, and 2 mm above the floor.
+    fn default() -> Self {
+        Self {
+            margin_m: 10e-3,
+            final_margin_m: 3e-3,
+            floor_clearance_m: 2e-3,
+        }
+    }
+}
+
+impl Masking {
+    /// The refinement's settings for `camera` in `cell` (its floor dropped when it has one),
+    /// σ_z from the pattern images (eq 1–5).
+    pub fn refine_settings(&self, camera: &CameraInfo, cell: Option<&Cell>) -> RefineSettings {
+        RefineSettings {
+            mask_margin_m: self.margin_m,
+            final_mask_margin_m: Some(self.final_margin_m),
+            background: cell.and_then(|c| c.floor).map(|floor| {
+                glint_estimation::view::BackgroundPlane {
+                    clearance_m: self.floor_clearance_m,
+                    ..floor
+                }
+            }),
+            erode_px: camera.window_radius_px,
+            window_radius_px: camera.window_radius_px,
+            sigma: RefineSigma::PatternImages,
+        }
+    }
+}
+
+/// σ_z of the constant-σ policy's predictions: 0.5 mm, about the median σ_z eq 1–5 gives the
+/// default camera's depth on the parts at 0.5 m.
+pub const CONST_SIGMA_Z_M: f64 = 0.5e-3;
+
+/// What the cell's calibration knows of its static surroundings: surfaces the render workers
+/// may render with the part (occluders and inter-reflectors), and the floor plane whose points
+/// are not the part.
+#[derive(Clone, Debug)]
+pub struct Cell {
+    pub surroundings: Vec<glint_uncertainty::KnownSurface>,
+    /// The floor, world frame (`clearance_m` is set by [`Masking`]).
+    pub floor: Option<glint_estimation::view::BackgroundPlane>,
+}
+
+impl Cell {
+    /// Glint's standard bin (the mock camera's), its floor at world z = 0, parts above.
+    pub fn standard_bin() -> Self {
+        Self {
+            surroundings: vec![glint_uncertainty::KnownSurface {
+                mesh: std::sync::Arc::new(glint_camera::bin::BinSpec::default().mesh()),
+                t_w_s: Isometry3::identity(),
+                material: glint_camera::materials::bin(),
+            }],
+            floor: Some(glint_estimation::view::BackgroundPlane {
+                normal_w: nalgebra::Vector3::z_axis(),
+                offset_m: 0.0,
+                clearance_m: 0.0,
+            }),
+        }
+    }
+
+    /// A cell the orchestrator knows nothing of: the part alone, as the paper renders it.
+    pub fn unknown() -> Self {
+        Self {
+            surroundings: Vec::new(),
+            floor: None,
+        }
+    }
 }
 
 /// Why a session's configuration is unusable.

@@ -71,6 +71,10 @@ pub struct CameraInfo {
     pub shots: u32,
     /// The stereo matcher's window radius, px.
     pub window_radius_px: u32,
+    /// Exposure time of the pattern captures, seconds (the Δt of eq 14).
+    pub exposure_s: f64,
+    /// Fraction of lit projector pixels in the random-dot patterns.
+    pub pattern_fill: f64,
 }
 
 /// A capture as the session receives it.
@@ -87,6 +91,9 @@ pub trait CameraStage: Send + Sync {
     /// A capture from left-camera pose `t_w_c`, with two noise shots for σ_I. `seed` drives a
     /// simulator's noise (a real camera ignores it).
     fn capture(&self, t_w_c: &Isometry3<f64>, seed: u64) -> Result<CapturedView, StageError>;
+    /// `count` left-camera poses (camera → world) the robot can reach, for a session's
+    /// candidates.
+    fn candidate_views(&self, count: usize) -> Result<Vec<Isometry3<f64>>, StageError>;
 }
 
 /// Which depth σ a refinement weighs points with.
@@ -223,12 +230,93 @@ pub struct PredictionObject {
     pub noise: glint_estimation::depth_sigma::NoiseModel,
     /// Known surroundings rendered with the part (the bin), empty for the part alone.
     pub surroundings: Vec<glint_uncertainty::KnownSurface>,
-    /// The camera's pattern shots per capture and matching window radius, px.
+    /// The camera's pattern shots per capture, the patterns' lit fraction, and the matching
+    /// window radius, px.
     pub shots: u32,
+    pub pattern_fill: f64,
     pub window_radius_px: u32,
 }
 
+/// A part's photometric calibration as the render workers need it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PartCalibration {
+    /// The fitted material (`glint calibrate bsdf`).
+    pub material: glint_render::bsdf::PrincipledParams<f32>,
+    /// The calibrated response (`glint calibrate response`).
+    pub response: glint_calibration::response::ResponseTable,
+    /// Relative radiance-map units per W·sr⁻¹·m⁻² (the BSDF fit's median per-view scale).
+    pub radiometric_scale: f64,
+}
+
+impl PartCalibration {
+    /// From what `glint calibrate bsdf` and `glint calibrate response` wrote.
+    pub fn from_files(
+        calibration: &glint_calibration::shipped::Calibration,
+    ) -> Result<Self, StageError> {
+        let radiometric_scale = calibration.material.radiometric_scale().ok_or_else(|| {
+            StageError::FailedPrecondition(
+                "the material file's provenance has no per_view[].radiometric_scale: refit it \
+                 with glint calibrate bsdf"
+                    .into(),
+            )
+        })?;
+        Ok(Self {
+            material: calibration
+                .material
+                .params()
+                .map_err(|e| StageError::invalid("material", e.to_string()))?,
+            response: calibration.response.clone(),
+            radiometric_scale,
+        })
+    }
+}
+
+/// Seed of the noise calibration's capture: apart from every session's capture seeds.
+pub const NOISE_CALIBRATION_SEED: u64 = 0x4015E;
+
+/// The sensor's noise σ_I² (eq 2), fitted from two read-outs of one shot from `t_w_c` — a
+/// capture of its own, as a cell calibrates its camera once.
+pub fn calibrate_noise(
+    camera: &dyn CameraStage,
+    t_w_c: &Isometry3<f64>,
+) -> Result<glint_estimation::depth_sigma::NoiseModel, StageError> {
+    let view = camera.capture(t_w_c, NOISE_CALIBRATION_SEED)?;
+    glint_estimation::view::noise_model_of(&view.measurement)
+        .map_err(|e| StageError::FailedPrecondition(format!("noise calibration: {e}")))
+}
+
 impl PredictionObject {
+    /// What the render workers know of `object` seen by `camera`: the fitted material, the
+    /// calibrated response and radiometric scale (`calibration`), the camera's rig, exposure,
+    /// shots and window, the sensor's `noise`, the cell's `surroundings` — never the
+    /// simulator's truth.
+    pub fn calibrated(
+        object: SessionObject,
+        calibration: &PartCalibration,
+        camera: &CameraInfo,
+        noise: glint_estimation::depth_sigma::NoiseModel,
+        surroundings: Vec<glint_uncertainty::KnownSurface>,
+    ) -> Result<Self, StageError> {
+        let calibrated = glint_uncertainty::CalibratedCamera::new(
+            calibration.response.clone(),
+            calibration.radiometric_scale,
+            camera.exposure_s,
+        )
+        .map_err(|e| StageError::invalid("radiometric_scale", e.to_string()))?;
+        let material = calibration.material;
+        Ok(Self {
+            object,
+            material,
+            camera: calibrated,
+            rig: camera.rig,
+            noise,
+            surroundings,
+            shots: camera.shots,
+            pattern_fill: camera.pattern_fill,
+            window_radius_px: camera.window_radius_px,
+        })
+    }
+
     /// The render workers' view of this object, with the part's SDF grid.
     pub fn predictor(
         &self,

@@ -299,6 +299,65 @@ pub fn noise_to_message(noise: &NoiseModel) -> v1::SensorNoiseModel {
     }
 }
 
+/// What a caller knows of an object to register it: a [`PredictorObject`] but for the SDF
+/// grid, which the worker builds.
+#[derive(Clone, Copy, Debug)]
+pub struct ObjectDescription<'a> {
+    /// The part's name (logs only; not part of the key).
+    pub name: &'a str,
+    pub mesh: &'a TriMesh,
+    pub material: &'a PrincipledParams<f32>,
+    pub camera: &'a CalibratedCamera,
+    pub rig: &'a SliRig,
+    pub noise: &'a NoiseModel,
+    pub surroundings: &'a [KnownSurface],
+    /// Pattern shots per capture (K) and the patterns' lit fraction.
+    pub shots: u32,
+    pub pattern_fill: f64,
+}
+
+/// The registration of `object` (the inverse of [`decode_object`]): meshes as binary PLY in
+/// metres.
+pub fn object_to_message(object: &ObjectDescription<'_>) -> v1::RegisterObjectRequest {
+    let mesh_file = |mesh: &TriMesh, name: &str| v1::MeshFile {
+        data: glint_geometry::io::write_ply_to_vec(
+            mesh,
+            glint_geometry::LengthUnit::Metre,
+            glint_geometry::io::PlyEncoding::BinaryLittleEndian,
+        ),
+        format: "ply".into(),
+        unit: v1::LengthUnit::Metre as i32,
+        name: name.into(),
+    };
+    let camera = &object.camera;
+    v1::RegisterObjectRequest {
+        mesh: Some(mesh_file(object.mesh, object.name)),
+        material: Some(material_to_message(object.material)),
+        response: Some(glint_calibration::server::response_to_message(
+            &camera.response,
+        )),
+        rig: Some(rig_to_message(
+            object.rig,
+            u32::from(camera.response.max_dn),
+            camera.exposure_s,
+        )),
+        radiometric_scale: camera.radiometric_scale,
+        pattern_exposure_s: camera.exposure_s,
+        noise: Some(noise_to_message(object.noise)),
+        shots_per_capture: object.shots,
+        pattern_fill: object.pattern_fill,
+        surroundings: object
+            .surroundings
+            .iter()
+            .map(|s| v1::KnownSurface {
+                mesh: Some(mesh_file(&s.mesh, "surrounding")),
+                t_w_s: Some((&s.t_w_s).into()),
+                material: Some(material_to_message(&s.material)),
+            })
+            .collect(),
+    }
+}
+
 /// Decodes and validates a registration and builds its object (meshes, SDF grid): the slow
 /// part, for the blocking pool.
 pub fn decode_object(
