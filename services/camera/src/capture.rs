@@ -348,6 +348,24 @@ impl MockSliCamera<'_> {
         self.capture_rendered(t_w_c, &rendered, seed)
     }
 
+    /// [`Self::capture`] and, when `noise_shots`, [`Self::noise_shots`] of the same render:
+    /// a capture as the camera stage delivers it (in-process and over gRPC alike).
+    pub fn capture_with_noise_shots(
+        &self,
+        t_w_c: &Isometry3<f64>,
+        seed: u64,
+        noise_shots: bool,
+    ) -> Result<(StereoCapture, Option<[Image<u16>; 2]>, CaptureTruth), CaptureError> {
+        let rendered = self.render_shots(t_w_c, seed);
+        let (capture, truth) = self.capture_rendered(t_w_c, &rendered, seed)?;
+        let noise = if noise_shots {
+            self.noise_shots(&rendered, seed)
+        } else {
+            None
+        };
+        Ok((capture, noise, truth))
+    }
+
     /// Two more read-outs of the first shot's left radiance: what a user takes to measure the
     /// sensor's noise (two shots of a static scene, photon transfer). Seeds `seed ^ 11` and
     /// `seed ^ 12`, as the experiments' recorded scenes.
