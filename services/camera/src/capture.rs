@@ -94,6 +94,9 @@ impl CaptureConfig {
     }
 }
 
+/// Two more read-outs of one shot's left radiance ([`MockSliCamera::noise_shots`]).
+pub type NoiseShots = [Image<u16>; 2];
+
 /// One stereo capture from one viewpoint.
 #[derive(Clone, Debug)]
 pub struct StereoCapture {
@@ -355,7 +358,7 @@ impl MockSliCamera<'_> {
         t_w_c: &Isometry3<f64>,
         seed: u64,
         noise_shots: bool,
-    ) -> Result<(StereoCapture, Option<[Image<u16>; 2]>, CaptureTruth), CaptureError> {
+    ) -> Result<(StereoCapture, Option<NoiseShots>, CaptureTruth), CaptureError> {
         let rendered = self.render_shots(t_w_c, seed);
         let (capture, truth) = self.capture_rendered(t_w_c, &rendered, seed)?;
         let noise = if noise_shots {

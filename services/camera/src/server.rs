@@ -197,7 +197,7 @@ pub fn scene_request(msg: &v1::SetUpSceneRequest) -> Result<SceneRequest, Conver
                 .mesh
                 .aabb()
                 .map_or(0.0, |(min, max)| f64::from((max - min).max()));
-            if !(extent <= limit) {
+            if extent.is_nan() || extent > limit {
                 return Err(ConversionError::new(
                     "part.mesh",
                     format!(
@@ -847,27 +847,27 @@ mod tests {
         assert_eq!(
             bad(v1::ListCandidateViewsRequest {
                 count: 0,
-                ..request.clone()
+                ..request
             }),
             "count"
         );
         assert_eq!(
             bad(v1::ListCandidateViewsRequest {
                 distance_m: -1.0,
-                ..request.clone()
+                ..request
             }),
             "distance_m"
         );
         assert_eq!(
             bad(v1::ListCandidateViewsRequest {
                 cap_half_angle_deg: 90.0,
-                ..request.clone()
+                ..request
             }),
             "cap_half_angle_deg"
         );
         let target = |x: f64| v1::ListCandidateViewsRequest {
             target_w_m: Some(v1::Vector3 { x, y: 0.0, z: 0.0 }),
-            ..request.clone()
+            ..request
         };
         assert_eq!(bad(target(f64::NAN)), "target_w_m.x");
         // A target a metre beside the bin: the views look past it.
