@@ -18,6 +18,13 @@ pub struct TestServer {
 impl TestServer {
     /// Starts `routes` with health for `service` and waits until it answers SERVING.
     pub async fn start(routes: tonic::service::Routes, service: &'static str) -> Self {
+        Self::start_services(routes, &[service]).await
+    }
+
+    /// Starts `routes` with health for each of `services` (a stage serving several, like the
+    /// mock camera) and waits until the first answers SERVING.
+    pub async fn start_services(routes: tonic::service::Routes, services: &[&'static str]) -> Self {
+        let service = services[0];
         let listener = glint_server::bind("127.0.0.1:0").await.unwrap();
         let target = format!("http://{}", listener.local_addr().unwrap());
         let (stop, stop_rx) = oneshot::channel::<()>();
@@ -25,7 +32,7 @@ impl TestServer {
             listener,
             routes,
             ServeConfig {
-                services: vec![service],
+                services: services.to_vec(),
                 drain_timeout: Duration::from_millis(300),
             },
             async {

@@ -1,6 +1,7 @@
 //! `glint serve <stage>` and `glint healthcheck`: the stage servers over the libraries, and
 //! the probe containers and scripts use. Flags fall back to environment variables
-//! (`GLINT_LISTEN`, `GLINT_TARGET`, `GLINT_DRAIN_TIMEOUT_S`).
+//! (`GLINT_LISTEN`, `GLINT_TARGET`, `GLINT_DRAIN_TIMEOUT_S`, and the camera's initial scene
+//! `GLINT_CAMERA_PART`, `GLINT_CAMERA_INSTANCES`, …).
 
 use std::time::Duration;
 
@@ -29,12 +30,73 @@ pub struct ServeArgs {
     pub drain_timeout_s: f64,
 }
 
-#[derive(clap::Subcommand, Clone, Copy, Debug)]
+#[derive(clap::Subcommand, Clone, Debug)]
 pub enum Stage {
+    /// `glint.v1.CameraService` and `glint.v1.MockCameraService`: the mock structured-light
+    /// camera (scene set-up, rig, candidate views, captures, exposure stacks).
+    Camera(CameraArgs),
     /// `glint.v1.CalibrationService`: camera response (Debevec–Malik) from a streamed stack.
     Calibration,
     /// `glint.v1.UncertaintyService`: a render worker (candidate-view prediction, eq 14–17).
     Uncertainty,
+}
+
+/// The mock camera's initial scene, as `SetUpScene` would set it up; without `--part` the
+/// camera starts empty and waits for a client's `SetUpScene`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct CameraArgs {
+    /// A built-in part dropped into the bin: eye-bolt, tube-fitting, chrome-screw, gear, zigzag.
+    #[arg(long, env = "GLINT_CAMERA_PART")]
+    pub part: Option<String>,
+    /// Copies dropped into the bin, 1 to 40.
+    #[arg(long, env = "GLINT_CAMERA_INSTANCES", default_value_t = 8)]
+    pub instances: u32,
+    /// Seed of the drop (the instances' poses).
+    #[arg(long, env = "GLINT_CAMERA_SEED", default_value_t = 1)]
+    pub seed: u64,
+    /// Image width, px (0 with --height-px 0: the N35's 1280).
+    #[arg(long, env = "GLINT_CAMERA_WIDTH_PX", default_value_t = 0)]
+    pub width_px: u32,
+    /// Image height, px (0 with --width-px 0: the N35's 1024).
+    #[arg(long, env = "GLINT_CAMERA_HEIGHT_PX", default_value_t = 0)]
+    pub height_px: u32,
+    /// Samples per pixel of the renders, 1 to 1024 (0: 4).
+    #[arg(long, env = "GLINT_CAMERA_SPP", default_value_t = 0)]
+    pub spp: u32,
+}
+
+impl CameraArgs {
+    /// The camera server, with the initial scene set up when `--part` is given.
+    fn camera(&self) -> anyhow::Result<glint_camera::server::Camera> {
+        let camera = glint_camera::server::Camera::new();
+        if let Some(part) = &self.part {
+            use glint_proto::v1;
+            let request = v1::SetUpSceneRequest {
+                part: Some(v1::PartSpec {
+                    part: Some(v1::part_spec::Part::Builtin(part.clone())),
+                }),
+                instances: self.instances,
+                material: None,
+                seed: self.seed,
+                width_px: self.width_px,
+                height_px: self.height_px,
+                samples_per_pixel: self.spp,
+            };
+            // The request's field names are the flags' (part.builtin is --part).
+            let scene = camera.set_up(&request).map_err(|status| {
+                anyhow::anyhow!(
+                    "the initial scene (--part, --instances, --width-px, --height-px, --spp): {}",
+                    status.message()
+                )
+            })?;
+            let mesh = scene.mesh.unwrap_or_default();
+            println!(
+                "scene: {} × {} (mesh sha256 {})",
+                scene.instances, mesh.name, mesh.sha256_hex
+            );
+        }
+        Ok(camera)
+    }
 }
 
 #[derive(clap::Args)]
@@ -66,7 +128,14 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
     let drain_timeout = seconds("--drain-timeout-s", args.drain_timeout_s)?;
     runtime()?.block_on(async {
         let listener = glint_server::bind(&args.listen).await?;
-        let (routes, services) = match args.stage {
+        let (routes, services) = match &args.stage {
+            Stage::Camera(camera) => {
+                let camera = camera.camera()?;
+                (
+                    camera.into_routes(),
+                    glint_camera::server::SERVICE_NAMES.to_vec(),
+                )
+            }
             Stage::Calibration => (
                 tonic::service::Routes::new(glint_calibration::server::Calibration.into_service()),
                 vec![glint_calibration::server::SERVICE_NAME],

@@ -82,6 +82,42 @@ impl BinSpec {
     pub fn centre(&self) -> Point3<f64> {
         Point3::origin()
     }
+
+    /// The bin's bounding box in the world, metres: `(min, max)` corners of the floor slab and
+    /// the walls.
+    pub fn bounds(&self) -> (Point3<f64>, Point3<f64>) {
+        let [sx, sy] = self.inner_size_m;
+        let t = self.wall_thickness_m;
+        (
+            Point3::new(-sx / 2.0 - t, -sy / 2.0 - t, -t),
+            Point3::new(sx / 2.0 + t, sy / 2.0 + t, self.wall_height_m),
+        )
+    }
+
+    /// Distance (metres) along the optical axis of a camera at `t_w_c` (camera → world; the
+    /// axis is the camera's +z from its centre) to where the axis enters the bin's bounding box
+    /// ([`Self::bounds`]); 0 when the camera is inside it, `None` when the axis misses it (or
+    /// the box lies behind the camera).
+    pub fn optical_axis_entry_m(&self, t_w_c: &Isometry3<f64>) -> Option<f64> {
+        let origin = t_w_c.translation.vector;
+        let direction = t_w_c.rotation * nalgebra::Vector3::z();
+        let (min, max) = self.bounds();
+        // Slab test: the ray's parameter interval inside each pair of planes, intersected.
+        let (mut near, mut far) = (0.0f64, f64::INFINITY);
+        for axis in 0..3 {
+            let (o, d) = (origin[axis], direction[axis]);
+            if d.abs() < 1e-12 {
+                if o < min[axis] || o > max[axis] {
+                    return None;
+                }
+                continue;
+            }
+            let (a, b) = ((min[axis] - o) / d, (max[axis] - o) / d);
+            near = near.max(a.min(b));
+            far = far.min(a.max(b));
+        }
+        (near <= far).then_some(near)
+    }
 }
 
 /// Label of the bin in instance masks (parts are 1..=N).
@@ -276,6 +312,38 @@ mod tests {
             });
             assert!(on_floor || on_part, "part {i} floats");
         }
+    }
+
+    #[test]
+    fn optical_axes_hit_the_bin_or_miss_it() {
+        use nalgebra::Vector3;
+        let bin = BinSpec::default();
+        let above = Isometry3::face_towards(
+            &Point3::new(0.0, 0.0, 0.5),
+            &Point3::origin(),
+            &Vector3::y(),
+        );
+        // Straight down from 0.5 m: the axis enters the box at the walls' top, z = 0.08 m.
+        let entry = bin.optical_axis_entry_m(&above).unwrap();
+        assert!((entry - (0.5 - bin.wall_height_m)).abs() < 1e-12, "{entry}");
+        // Looking up, or down beside the bin: no hit.
+        let up = Isometry3::face_towards(
+            &Point3::new(0.0, 0.0, 0.5),
+            &Point3::new(0.0, 0.0, 1.0),
+            &Vector3::y(),
+        );
+        assert_eq!(bin.optical_axis_entry_m(&up), None);
+        let beside = Isometry3::face_towards(
+            &Point3::new(0.5, 0.0, 0.5),
+            &Point3::new(0.5, 0.0, 0.0),
+            &Vector3::y(),
+        );
+        assert_eq!(bin.optical_axis_entry_m(&beside), None);
+        // Inside the box.
+        assert_eq!(
+            bin.optical_axis_entry_m(&Isometry3::translation(0.0, 0.0, 0.01)),
+            Some(0.0)
+        );
     }
 
     #[test]

@@ -94,6 +94,9 @@ impl CaptureConfig {
     }
 }
 
+/// Two more read-outs of one shot's left radiance ([`MockSliCamera::noise_shots`]).
+pub type NoiseShots = [Image<u16>; 2];
+
 /// One stereo capture from one viewpoint.
 #[derive(Clone, Debug)]
 pub struct StereoCapture {
@@ -346,6 +349,24 @@ impl MockSliCamera<'_> {
     ) -> Result<(StereoCapture, CaptureTruth), CaptureError> {
         let rendered = self.render_shots(t_w_c, seed);
         self.capture_rendered(t_w_c, &rendered, seed)
+    }
+
+    /// [`Self::capture`] and, when `noise_shots`, [`Self::noise_shots`] of the same render:
+    /// a capture as the camera stage delivers it (in-process and over gRPC alike).
+    pub fn capture_with_noise_shots(
+        &self,
+        t_w_c: &Isometry3<f64>,
+        seed: u64,
+        noise_shots: bool,
+    ) -> Result<(StereoCapture, Option<NoiseShots>, CaptureTruth), CaptureError> {
+        let rendered = self.render_shots(t_w_c, seed);
+        let (capture, truth) = self.capture_rendered(t_w_c, &rendered, seed)?;
+        let noise = if noise_shots {
+            self.noise_shots(&rendered, seed)
+        } else {
+            None
+        };
+        Ok((capture, noise, truth))
     }
 
     /// Two more read-outs of the first shot's left radiance: what a user takes to measure the

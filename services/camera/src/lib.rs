@@ -9,6 +9,8 @@ pub mod effects;
 pub mod exposure;
 pub mod materials;
 pub mod record;
+#[cfg(feature = "server")]
+pub mod server;
 pub mod setup;
 pub mod views;
 pub mod visibility;

@@ -57,11 +57,9 @@ impl CameraStage for MockCamera {
     fn capture(&self, t_w_c: &Isometry3<f64>, seed: u64) -> Result<CapturedView, StageError> {
         let started = Instant::now();
         let camera = self.setup.camera();
-        let rendered = camera.render_shots(t_w_c, seed);
-        let (capture, _truth) = camera
-            .capture_rendered(t_w_c, &rendered, seed)
+        let (capture, noise_shots, _truth) = camera
+            .capture_with_noise_shots(t_w_c, seed, true)
             .map_err(|e| StageError::Internal(format!("capture: {e}")))?;
-        let noise_shots = camera.noise_shots(&rendered, seed);
         let left = capture.shot_images(0).into_iter().cloned().collect();
         let right = capture.shot_images(1).into_iter().cloned().collect();
         Ok(CapturedView {

@@ -140,6 +140,14 @@ pub fn object_key(request: &v1::RegisterObjectRequest) -> String {
     if let Some(mesh) = canonical.mesh.as_mut() {
         mesh.name.clear();
     }
+    if let Some(pose) = canonical
+        .rig
+        .as_mut()
+        .and_then(|rig| rig.t_left_projector.as_mut())
+    {
+        pose.parent_frame.clear();
+        pose.child_frame.clear();
+    }
     for surface in &mut canonical.surroundings {
         if let Some(mesh) = surface.mesh.as_mut() {
             mesh.name.clear();
@@ -229,7 +237,8 @@ pub fn material_to_message(p: &PrincipledParams<f32>) -> v1::PrincipledMaterial 
     }
 }
 
-/// The rig: the stereo pair, the projector at its midpoint looking along the left camera's +z.
+/// The rig: the stereo pair and the projector at `t_left_projector` (absent: at the rig's
+/// midpoint, looking along the left camera's +z).
 pub fn rig_from_message(rig: &v1::GetRigResponse) -> Result<SliRig, ConversionError> {
     let stereo =
         StereoRig::try_from(required(&rig.stereo, "stereo")?).map_err(|e| e.within("stereo"))?;
@@ -244,15 +253,21 @@ pub fn rig_from_message(rig: &v1::GetRigResponse) -> Result<SliRig, ConversionEr
             " (W/sr)",
         )?
     };
+    let t_left_projector = match &rig.t_left_projector {
+        Some(pose) => Isometry3::try_from(pose).map_err(|e| e.within("t_left_projector"))?,
+        None => Isometry3::translation(stereo.baseline_m / 2.0, 0.0, 0.0),
+    };
     Ok(SliRig {
         stereo,
-        t_left_projector: Isometry3::translation(stereo.baseline_m / 2.0, 0.0, 0.0),
+        t_left_projector,
         projector_intrinsics: projector,
         projector_intensity_w_per_sr: intensity as f32,
     })
 }
 
-/// A rig as its message (`max_dn` and `exposure_s` are the camera's, not the rig's).
+/// A rig as its message (`max_dn` and `exposure_s` are the camera's, not the rig's; the
+/// capture settings `shots_per_capture`, `window_radius_px` and `pattern_fill` are left 0, as a
+/// registration carries its own).
 pub fn rig_to_message(rig: &SliRig, max_dn: u32, exposure_s: f64) -> v1::GetRigResponse {
     v1::GetRigResponse {
         stereo: Some((&rig.stereo).into()),
@@ -260,6 +275,14 @@ pub fn rig_to_message(rig: &SliRig, max_dn: u32, exposure_s: f64) -> v1::GetRigR
         max_dn,
         exposure_s,
         projector_intensity_w_per_sr: f64::from(rig.projector_intensity_w_per_sr),
+        t_left_projector: Some(v1::Pose::with_frames(
+            &rig.t_left_projector,
+            "left_camera",
+            "projector",
+        )),
+        shots_per_capture: 0,
+        window_radius_px: 0,
+        pattern_fill: 0.0,
     }
 }
 

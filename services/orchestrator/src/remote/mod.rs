@@ -5,6 +5,8 @@
 //! hold a tokio runtime [`Handle`] and block on their calls. Never call them from inside an
 //! async task: run the session with `tokio::task::spawn_blocking` (or on a plain thread).
 
+pub mod camera;
+
 use std::future::Future;
 use std::time::Duration;
 
