@@ -35,6 +35,9 @@ pub enum Stage {
     Calibration,
     /// `glint.v1.UncertaintyService`: a render worker (candidate-view prediction, eq 14–17).
     Uncertainty,
+    /// `glint.v1.EstimationService`: multi-view SDF refinement with covariance (eq 1–11,
+    /// 18–19) and the next view by minimum entropy (eq 20–23).
+    Estimation,
 }
 
 #[derive(clap::Args)]
@@ -76,6 +79,12 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
                     glint_uncertainty::server::Uncertainty::default().into_service(),
                 ),
                 vec![glint_uncertainty::server::SERVICE_NAME],
+            ),
+            Stage::Estimation => (
+                tonic::service::Routes::new(
+                    glint_estimation::server::Estimation::default().into_service(),
+                ),
+                vec![glint_estimation::server::SERVICE_NAME],
             ),
         };
         // The bound address on stdout, so a script that passed port 0 can read it.

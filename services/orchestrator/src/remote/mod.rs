@@ -13,6 +13,8 @@ use tonic::Code;
 
 use crate::stages::StageError;
 
+pub mod estimation;
+
 /// A stage's server address and how long its calls may take.
 #[derive(Clone, Debug)]
 pub struct Endpoint {
