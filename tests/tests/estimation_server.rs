@@ -20,7 +20,7 @@ use glint_e2e::TestServer;
 use std::time::Duration;
 
 use glint_estimation::server::{
-    Estimation, SERVICE_NAME, refine_chunks, refine_header, view_arrays,
+    Estimation, SERVICE_NAME, mesh_file, refine_chunks, refine_header, view_arrays,
 };
 use glint_estimation::view::ViewMeasurement;
 use glint_eval::active::{ActiveSceneSpec, Masking, session_config, set_up};
@@ -72,6 +72,7 @@ struct Captured {
     settings: RefineSettings,
     t_w_o: Isometry3<f64>,
     mesh_sha256_hex: String,
+    mesh: std::sync::Arc<glint_geometry::TriMesh>,
 }
 
 /// RemoteEstimation against LocalEstimation: on a blocking thread, as a session runs it.
@@ -187,6 +188,7 @@ fn remote_equals_local(target: &str, handle: tokio::runtime::Handle) -> Captured
         settings,
         t_w_o,
         mesh_sha256_hex: scene.object.mesh_sha256_hex.clone(),
+        mesh: scene.object.mesh.clone(),
     }
 }
 
@@ -224,6 +226,13 @@ async fn remote_estimation_equals_local_and_names_bad_fields() {
     let mut client = EstimationServiceClient::connect(server.target.clone())
         .await
         .unwrap();
+    // The service keys the mesh as the session does: the content hash survives the PLY file.
+    let key = client
+        .register_mesh(mesh_file(&c.mesh, "zigzag"))
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(key.sha256_hex, c.mesh_sha256_hex);
     let views: Vec<&ViewMeasurement> = c.views.iter().collect();
     let good = refine_chunks(&c.mesh_sha256_hex, &c.t_w_o, &c.settings, &views);
 
