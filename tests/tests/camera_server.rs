@@ -228,7 +228,7 @@ async fn remote_camera_captures_what_the_mock_camera_captures() {
 
     // Ground truth (evaluation only) and candidate views: the library's, to rounding.
     let truth = mock
-        .get_ground_truth(v1::GetGroundTruthRequest {})
+        .get_ground_truth(v1::GetGroundTruthRequest::default())
         .await
         .unwrap()
         .into_inner();
@@ -353,7 +353,7 @@ async fn bad_requests_name_the_field_and_a_sceneless_camera_asks_for_a_scene() {
             .await
             .unwrap_err(),
         camera.get_rig(v1::GetRigRequest {}).await.unwrap_err(),
-        mock.get_ground_truth(v1::GetGroundTruthRequest {})
+        mock.get_ground_truth(v1::GetGroundTruthRequest::default())
             .await
             .unwrap_err(),
     ] {

@@ -12,6 +12,7 @@ mod mesh_cmd;
 mod mitsuba_export;
 mod preview;
 mod serve_cmd;
+mod session_cmd;
 
 use clap::{Parser, Subcommand};
 
@@ -48,6 +49,8 @@ enum Command {
     Serve(serve_cmd::ServeArgs),
     /// Exits 0 only when the server (or --service) answers SERVING: for container probes.
     Healthcheck(serve_cmd::HealthcheckArgs),
+    /// A client of an orchestrator: run, list, show or cancel active sessions.
+    Session(session_cmd::SessionArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -68,6 +71,7 @@ fn main() -> std::process::ExitCode {
         Some(Command::Calibrate(cmd)) => calibrate_cmd::run(cmd),
         Some(Command::Serve(args)) => serve_cmd::serve(&args),
         Some(Command::Healthcheck(args)) => serve_cmd::healthcheck(&args),
+        Some(Command::Session(args)) => session_cmd::run(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

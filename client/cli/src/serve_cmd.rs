@@ -39,6 +39,61 @@ pub enum Stage {
     Calibration,
     /// `glint.v1.UncertaintyService`: a render worker (candidate-view prediction, eq 14–17).
     Uncertainty,
+    /// `glint.v1.EstimationService`: multi-view SDF refinement with covariance (eq 1–11,
+    /// 18–19) and the next view by minimum entropy (eq 20–23).
+    Estimation,
+    /// `glint.v1.OrchestratorService`: active sessions over a camera, an estimator and render
+    /// workers reached by gRPC.
+    Orchestrator(OrchestratorArgs),
+    /// Every service in one process on one port (the orchestrator reaches the others, and
+    /// the render workers given by --workers, through that port).
+    All(AllArgs),
+}
+
+/// Where the orchestrator's stages are and how it fans out.
+#[derive(clap::Args, Clone, Debug)]
+pub struct OrchestratorArgs {
+    /// The camera (CameraService), HOST:PORT.
+    #[arg(long, env = "GLINT_CAMERA_ADDR")]
+    pub camera: String,
+    /// The estimator (EstimationService), HOST:PORT.
+    #[arg(long, env = "GLINT_ESTIMATION_ADDR")]
+    pub estimation: String,
+    /// The render workers (UncertaintyService): HOST:PORT[,HOST:PORT...], or dns:HOST:PORT to
+    /// re-resolve a name before every decision (a compose service, a headless Service).
+    #[arg(long, env = "GLINT_WORKERS")]
+    pub workers: String,
+    #[command(flatten)]
+    pub fan_out: FanOutArgs,
+}
+
+/// How the orchestrator spreads and bounds its calls.
+#[derive(clap::Args, Clone, Debug)]
+pub struct FanOutArgs {
+    /// Requests in flight per render worker.
+    #[arg(long, env = "GLINT_IN_FLIGHT_PER_WORKER", default_value_t = 2,
+          value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub in_flight_per_worker: u32,
+    /// Deadline of every call to a stage, seconds (sent as grpc-timeout).
+    #[arg(long, env = "GLINT_CALL_DEADLINE_S", default_value_t = 120.0)]
+    pub call_deadline_s: f64,
+    /// What the orchestrator knows of the cell: `standard-bin` (Glint's bin: rendered with the
+    /// part, its floor's points dropped) or `none` (the part alone, as the paper renders it).
+    #[arg(long, env = "GLINT_CELL", default_value = "standard-bin",
+          value_parser = ["standard-bin", "none"])]
+    pub cell: String,
+}
+
+#[derive(clap::Args, Clone, Debug)]
+pub struct AllArgs {
+    #[command(flatten)]
+    pub camera: CameraArgs,
+    /// Render workers besides this process's own: HOST:PORT[,...] or dns:HOST:PORT. Default:
+    /// this process's UncertaintyService.
+    #[arg(long, env = "GLINT_WORKERS")]
+    pub workers: Option<String>,
+    #[command(flatten)]
+    pub fan_out: FanOutArgs,
 }
 
 /// The mock camera's initial scene, as `SetUpScene` would set it up; without `--part` the
@@ -124,6 +179,52 @@ fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
         .context("starting the async runtime")
 }
 
+/// The orchestrator over gRPC stages at `camera`, `estimation` and `workers`.
+fn orchestrator(
+    camera: &str,
+    estimation: &str,
+    workers: &str,
+    fan_out: &FanOutArgs,
+) -> anyhow::Result<glint_orchestrator::server::OrchestratorServer> {
+    use glint_orchestrator::remote::{self, prediction};
+    use std::sync::Arc;
+    let deadline = seconds("--call-deadline-s", fan_out.call_deadline_s)?;
+    anyhow::ensure!(
+        deadline > Duration::ZERO,
+        "--call-deadline-s: must be positive"
+    );
+    let handle = tokio::runtime::Handle::current();
+    let endpoint = |addr: &str| remote::Endpoint::new(addr, deadline);
+    let source =
+        prediction::WorkerSource::parse(workers).map_err(|e| anyhow::anyhow!("--workers: {e}"))?;
+    let pool = prediction::RemotePrediction::new(
+        handle.clone(),
+        source,
+        prediction::PoolConfig {
+            in_flight_per_worker: fan_out.in_flight_per_worker as usize,
+            call_deadline: deadline,
+            ..prediction::PoolConfig::default()
+        },
+    );
+    let camera = remote::camera::RemoteCamera::new(handle.clone(), endpoint(camera))
+        .map_err(|e| anyhow::anyhow!("--camera: {e}"))?;
+    let estimation = remote::estimation::RemoteEstimation::new(handle, endpoint(estimation))
+        .map_err(|e| anyhow::anyhow!("--estimation: {e}"))?;
+    let cell = match fan_out.cell.as_str() {
+        "none" => glint_orchestrator::session::Cell::unknown(),
+        _ => glint_orchestrator::session::Cell::standard_bin(),
+    };
+    Ok(glint_orchestrator::server::OrchestratorServer::new(
+        Arc::new(glint_orchestrator::service::Orchestrator::new(
+            Arc::new(camera),
+            Arc::new(estimation),
+            Arc::new(pool),
+            cell,
+            Arc::new(glint_orchestrator::service::MemoryStore::default()),
+        )),
+    ))
+}
+
 pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
     let drain_timeout = seconds("--drain-timeout-s", args.drain_timeout_s)?;
     runtime()?.block_on(async {
@@ -146,6 +247,39 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
                 ),
                 vec![glint_uncertainty::server::SERVICE_NAME],
             ),
+            Stage::Estimation => (
+                tonic::service::Routes::new(
+                    glint_estimation::server::Estimation::default().into_service(),
+                ),
+                vec![glint_estimation::server::SERVICE_NAME],
+            ),
+            Stage::Orchestrator(o) => (
+                tonic::service::Routes::new(
+                    orchestrator(&o.camera, &o.estimation, &o.workers, &o.fan_out)?.into_service(),
+                ),
+                vec![glint_orchestrator::server::SERVICE_NAME],
+            ),
+            Stage::All(all) => {
+                // The orchestrator reaches every stage through this very port.
+                let own = listener.local_addr()?.to_string();
+                let workers = all.workers.clone().unwrap_or_else(|| own.clone());
+                let routes = all
+                    .camera
+                    .camera()?
+                    .into_routes()
+                    .add_service(glint_calibration::server::Calibration.into_service())
+                    .add_service(glint_uncertainty::server::Uncertainty::default().into_service())
+                    .add_service(glint_estimation::server::Estimation::default().into_service())
+                    .add_service(orchestrator(&own, &own, &workers, &all.fan_out)?.into_service());
+                let mut services = glint_camera::server::SERVICE_NAMES.to_vec();
+                services.extend([
+                    glint_calibration::server::SERVICE_NAME,
+                    glint_uncertainty::server::SERVICE_NAME,
+                    glint_estimation::server::SERVICE_NAME,
+                    glint_orchestrator::server::SERVICE_NAME,
+                ]);
+                (routes, services)
+            }
         };
         // The bound address on stdout, so a script that passed port 0 can read it.
         println!("listening on {}", listener.local_addr()?);

@@ -703,10 +703,32 @@ impl MockCameraService for Camera {
     /// predictors never call it.
     async fn get_ground_truth(
         &self,
-        _request: Request<v1::GetGroundTruthRequest>,
+        request: Request<v1::GetGroundTruthRequest>,
     ) -> Result<Response<v1::GetGroundTruthResponse>, Status> {
         let scene = self.scene()?;
+        let visibility = match &request.get_ref().visibility_from_t_w_c {
+            None => Vec::new(),
+            Some(pose) => {
+                let t_w_c =
+                    Isometry3::try_from(pose).map_err(|e| e.within("visibility_from_t_w_c"))?;
+                let scene = scene.clone();
+                glint_server::blocking(move || {
+                    let [left, _] = scene.setup.rig.cameras(&t_w_c);
+                    let labels: Vec<u16> = (1..=scene.setup.poses.len() as u16).collect();
+                    crate::visibility::instance_visibility(&scene.setup.scene, &left, &labels)
+                        .iter()
+                        .map(|v| v1::InstanceVisibility {
+                            px_count_all: v.px_count_all as u32,
+                            px_count_visib: v.px_count_visib as u32,
+                            visib_fract: v.visib_fract,
+                        })
+                        .collect()
+                })
+                .await?
+            }
+        };
         Ok(Response::new(v1::GetGroundTruthResponse {
+            visibility,
             t_w_o: scene
                 .setup
                 .poses

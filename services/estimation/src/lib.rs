@@ -6,14 +6,19 @@
 //!   (eq 8–11) and the pose covariance from the Fisher information (eq 18–19);
 //! - [`icp`]: the ICP baseline (point-to-point and point-to-plane) on the same inputs;
 //! - [`nbv`]: next-best-view planning by minimum pose entropy (eq 20–23) and the heuristics;
-//! - [`view`]: one captured view → the part's depth points under a pose hypothesis.
+//! - [`view`]: one captured view → the part's depth points under a pose hypothesis;
+//! - [`multiview`]: a session's views → one refined pose with its information (the two-pass
+//!   hypothesis-silhouette masking the in-process stage and the `Refine` RPC share).
 //!
 //! Conventions are the geometry crate's: metres, `t_a_b` maps b → a, left perturbations
 //! `T ← exp(δ)·T` with δ = (ρ, φ). Nothing here reads ground truth.
 
 pub mod depth_sigma;
 pub mod icp;
+pub mod multiview;
 pub mod nbv;
 pub mod points;
 pub mod refine;
+#[cfg(feature = "server")]
+pub mod server;
 pub mod view;

@@ -84,7 +84,9 @@ fn ln_det_spd(f: &Matrix6<f64>) -> Option<f64> {
     ln_det.is_finite().then_some(ln_det)
 }
 
-fn check_symmetric(f: &Matrix6<f64>, which: &str) -> Result<(), NbvError> {
+/// Checks that `f` is finite and symmetric to within 1e-9 of its largest entry; `which` names
+/// it in the error. What the planner requires of every matrix it is given.
+pub fn check_symmetric(f: &Matrix6<f64>, which: &str) -> Result<(), NbvError> {
     let scale = f.amax().max(f64::MIN_POSITIVE);
     let symmetric = f.iter().all(|v| v.is_finite()) && (f - f.transpose()).amax() <= 1e-9 * scale;
     if symmetric {

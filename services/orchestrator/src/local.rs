@@ -6,20 +6,18 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use glint_camera::setup::BinSetup;
-use glint_estimation::nbv::{PosePrior, plan_next_view, pose_entropy_nats};
-use glint_estimation::refine::{SdfRefineConfig, refine_sdf};
-use glint_estimation::view::{
-    SigmaSource, ViewError, ViewMeasurement, ViewPoints, ViewSigma, hypothesis_mask,
-    points_in_mask, view_sigma,
-};
+use glint_estimation::multiview::{self, MultiviewError};
+use glint_estimation::nbv::{NbvError, PosePrior, plan_next_view, pose_entropy_nats};
+use glint_estimation::refine::SdfRefineConfig;
+use glint_estimation::view::{ViewError, ViewMeasurement, ViewPoints, ViewSigma};
 use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use nalgebra::{Isometry3, Matrix6};
 use rayon::prelude::*;
 
 use crate::stages::{
     CameraInfo, CameraStage, CandidateInformation, CapturedView, EstimationStage, PredictionObject,
-    PredictionRequest, PredictionSigma, PredictionStage, RefineSettings, RefineSigma, Refinement,
-    SessionObject, StageError, ViewPlan,
+    PredictionRequest, PredictionSigma, PredictionStage, RefineSettings, Refinement, SessionObject,
+    StageError, ViewPlan,
 };
 use glint_uncertainty::{
     PredictionError, PredictionSettings, SigmaModel, candidate_seed, predict_candidate,
@@ -200,19 +198,32 @@ fn stage_error(e: ViewError) -> StageError {
     }
 }
 
+/// A multi-view refinement's error as a stage's: bad input names its field, anything else is a
+/// precondition the data did not meet (too few points, noise shots that differ).
+pub fn refinement_error(e: MultiviewError) -> StageError {
+    match e {
+        MultiviewError::Input { field, message } => StageError::invalid(field, message),
+        other => StageError::FailedPrecondition(other.to_string()),
+    }
+}
+
+/// A planner's error as a stage's, naming the matrix at fault (`collected`, `candidates[2]`).
+pub fn plan_error(e: NbvError) -> StageError {
+    let field = match &e {
+        NbvError::NotSymmetric { which } | NbvError::NotPositive { which } => which.clone(),
+        NbvError::TakenOutOfRange { .. } | NbvError::AllTaken => "taken".into(),
+        NbvError::BadPrior => "prior".into(),
+        NbvError::NoCandidates | NbvError::NoViewTaken => "candidates".into(),
+    };
+    StageError::invalid(field, e.to_string())
+}
+
 /// A view's σ_z as `settings` asks for it (eq 1–5 from its pattern images, or constant).
 pub fn sigma_of_view(
     view: &ViewMeasurement,
     settings: &RefineSettings,
 ) -> Result<ViewSigma, StageError> {
-    let sigma = match settings.sigma {
-        RefineSigma::PatternImages => SigmaSource::PatternImages {
-            window_radius_px: settings.window_radius_px,
-            noise: None,
-        },
-        RefineSigma::Constant { sigma_z_m } => SigmaSource::Constant { sigma_z_m },
-    };
-    view_sigma(view, &sigma).map_err(stage_error)
+    multiview::sigma_of_view(view, settings).map_err(stage_error)
 }
 
 /// A view's part points in the silhouette of the hypothesis `t_w_o` grown by `margin_m`,
@@ -225,12 +236,8 @@ pub fn points_of_view(
     margin_m: f64,
     settings: &RefineSettings,
 ) -> Result<ViewPoints, StageError> {
-    let mask = hypothesis_mask(&object.mesh, &view.stereo, &view.t_w_c, t_w_o, margin_m);
-    let mut points = points_in_mask(view, &mask, sigma, settings.erode_px).map_err(stage_error)?;
-    if let Some(background) = &settings.background {
-        points.drop_background(background);
-    }
-    Ok(points)
+    multiview::points_of_view(&object.mesh, view, sigma, t_w_o, margin_m, settings)
+        .map_err(stage_error)
 }
 
 impl EstimationStage for LocalEstimation {
@@ -241,66 +248,10 @@ impl EstimationStage for LocalEstimation {
         t_w_o: &Isometry3<f64>,
         settings: &RefineSettings,
     ) -> Result<Refinement, StageError> {
-        let started = Instant::now();
         let grid = self.grids.grid(object)?;
-        // σ_z once per view: both masking passes use it.
-        let sigmas: Vec<ViewSigma> = views
-            .par_iter()
-            .map(|v| sigma_of_view(&v.measurement, settings))
-            .collect::<Result<_, _>>()?;
-        let points_at = |t_w_o: &Isometry3<f64>, margin_m: f64| {
-            let per_view: Vec<ViewPoints> = views
-                .par_iter()
-                .zip(&sigmas)
-                .map(|(v, sigma)| {
-                    points_of_view(object, &v.measurement, sigma, t_w_o, margin_m, settings)
-                })
-                .collect::<Result<_, StageError>>()?;
-            let counts: Vec<usize> = per_view.iter().map(|v| v.points.len()).collect();
-            let points: Vec<_> = per_view.into_iter().flat_map(|v| v.points).collect();
-            Ok::<_, StageError>((points, counts))
-        };
-        let refine = |points: &[_], t_w_o: &Isometry3<f64>| {
-            refine_sdf(&grid, points, &t_w_o.inverse(), &self.refine)
-                .map_err(|e| StageError::FailedPrecondition(format!("refinement: {e}")))
-        };
-        let (points, mut view_points) = points_at(t_w_o, settings.mask_margin_m)?;
-        let mut result = refine(&points, t_w_o)?;
-        if let Some(margin_m) = settings.final_mask_margin_m
-            && result.status != glint_estimation::refine::RefineStatus::Diverged
-        {
-            let first = result.t_o_w.inverse();
-            let (points, counts) = points_at(&first, margin_m)?;
-            result = refine(&points, &first)?;
-            view_points = counts;
-        }
-        let status = match result.status {
-            glint_estimation::refine::RefineStatus::Converged => "converged",
-            glint_estimation::refine::RefineStatus::MaxIterations => "max_iterations",
-            glint_estimation::refine::RefineStatus::Diverged => "diverged",
-        };
-        // A diverged pose is not an estimate: keep the hypothesis, claim no information.
-        let diverged = result.status == glint_estimation::refine::RefineStatus::Diverged;
-        let (t_w_o_refined, information, covariance) = if diverged {
-            (*t_w_o, Matrix6::zeros(), None)
-        } else {
-            (
-                result.t_o_w.inverse(),
-                result.information,
-                result.covariance,
-            )
-        };
-        Ok(Refinement {
-            t_w_o: t_w_o_refined,
-            information,
-            covariance,
-            view_points,
-            inliers: result.inliers,
-            iterations: result.iterations,
-            status: status.to_string(),
-            final_cost: result.final_cost,
-            refine_ms: started.elapsed().as_secs_f64() * 1e3,
-        })
+        let views: Vec<&ViewMeasurement> = views.iter().map(|v| &v.measurement).collect();
+        multiview::refine_views(&object.mesh, &grid, &views, t_w_o, settings, &self.refine)
+            .map_err(refinement_error)
     }
 
     fn plan(
@@ -309,8 +260,7 @@ impl EstimationStage for LocalEstimation {
         candidates: &[Matrix6<f64>],
         taken: &[usize],
     ) -> Result<ViewPlan, StageError> {
-        let plan = plan_next_view(collected, candidates, taken, &self.prior)
-            .map_err(|e| StageError::invalid("candidates", e.to_string()))?;
+        let plan = plan_next_view(collected, candidates, taken, &self.prior).map_err(plan_error)?;
         Ok(ViewPlan {
             chosen: plan.chosen,
             entropies_nats: plan.entropies_nats,
@@ -318,7 +268,6 @@ impl EstimationStage for LocalEstimation {
     }
 
     fn entropy_nats(&self, information: &Matrix6<f64>) -> Result<f64, StageError> {
-        pose_entropy_nats(information, &self.prior)
-            .map_err(|e| StageError::invalid("information", e.to_string()))
+        pose_entropy_nats(information, &self.prior).map_err(plan_error)
     }
 }

@@ -96,50 +96,9 @@ pub trait CameraStage: Send + Sync {
     fn candidate_views(&self, count: usize) -> Result<Vec<Isometry3<f64>>, StageError>;
 }
 
-/// Which depth σ a refinement weighs points with.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum RefineSigma {
-    /// From each view's pattern images (eq 1–5), the paper's method.
-    PatternImages,
-    /// The same σ_z for every point, metres (an unweighted refinement).
-    Constant { sigma_z_m: f64 },
-}
-
-/// How the estimator finds the part's pixels and weighs them.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RefineSettings {
-    /// The hypothesis silhouette grows by this, metres at the part's depth, to hold the part
-    /// when the hypothesis is off.
-    pub mask_margin_m: f64,
-    /// A second pass re-masks at the first pass's pose with this margin (metres) and refines
-    /// again, so the wide first mask's neighbours stop pulling; `None`: one pass.
-    pub final_mask_margin_m: Option<f64>,
-    /// A known plane that is not the part (the bin's floor): its points are dropped.
-    pub background: Option<glint_estimation::view::BackgroundPlane>,
-    /// Mask erosion before taking points, px (stereo windows straddling the silhouette).
-    pub erode_px: u32,
-    /// The matcher's window radius, px (eq 2–3 sum over it).
-    pub window_radius_px: u32,
-    pub sigma: RefineSigma,
-}
-
-/// What a refinement over all views so far gives.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Refinement {
-    pub t_w_o: Isometry3<f64>,
-    /// Fisher information of the pose (eq 18) and its inverse (eq 19; `None` when singular).
-    pub information: Matrix6<f64>,
-    pub covariance: Option<Matrix6<f64>>,
-    /// Depth points of the part per view, in view order.
-    pub view_points: Vec<usize>,
-    pub inliers: usize,
-    pub iterations: usize,
-    /// "converged", "max_iterations" or "diverged".
-    pub status: String,
-    pub final_cost: f64,
-    /// Time the refinement took, milliseconds.
-    pub refine_ms: f64,
-}
+// The refinement's settings and result are the estimation library's (one code path for the
+// in-process stage and the estimation server).
+pub use glint_estimation::multiview::{RefineSettings, RefineSigma, Refinement};
 
 /// The planner's answer (eq 23).
 #[derive(Clone, Debug, PartialEq)]

@@ -104,6 +104,8 @@ pub fn camera_info(rig: &v1::GetRigResponse) -> Result<CameraInfo, StageError> {
         max_dn,
         shots: rig.shots_per_capture,
         window_radius_px: rig.window_radius_px,
+        exposure_s: rig.exposure_s,
+        pattern_fill: rig.pattern_fill,
     })
 }
 
@@ -218,6 +220,31 @@ impl CameraStage for RemoteCamera {
         }
         let info = self.fetch_info()?;
         Ok(*self.info.get_or_init(|| info))
+    }
+
+    fn candidate_views(&self, count: usize) -> Result<Vec<Isometry3<f64>>, StageError> {
+        let count = u32::try_from(count)
+            .map_err(|_| StageError::invalid("count", format!("{count} is too many views")))?;
+        let mut client = self.client.clone();
+        let message = request(
+            v1::ListCandidateViewsRequest {
+                count,
+                ..Default::default()
+            },
+            self.endpoint.deadline,
+        );
+        let poses = self.call(async move {
+            Ok(client
+                .list_candidate_views(message)
+                .await
+                .map_err(|s| stage_error(&s))?
+                .into_inner()
+                .t_w_c)
+        })?;
+        poses
+            .iter()
+            .map(|p| Isometry3::try_from(p).map_err(bad_reply))
+            .collect()
     }
 
     fn capture(&self, t_w_c: &Isometry3<f64>, seed: u64) -> Result<CapturedView, StageError> {

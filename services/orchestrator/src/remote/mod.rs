@@ -15,6 +15,7 @@ use tonic::Code;
 
 use crate::stages::StageError;
 
+pub mod estimation;
 pub mod prediction;
 
 /// A stage's server address and how long its calls may take.
