@@ -9,6 +9,7 @@ use anyhow::Context;
 use glint_eval::active::stand_in_detector;
 use glint_geometry::Part;
 use glint_geometry::pose_deviation::{PoseDeviation, pose_deviation};
+use glint_orchestrator::server::policy_message;
 use glint_orchestrator::session::ViewPolicy;
 use glint_proto::v1;
 use glint_proto::v1::mock_camera_service_client::MockCameraServiceClient;
@@ -286,15 +287,6 @@ pub async fn run_remote(
         deviations,
         initial_deviation,
     })
-}
-
-fn policy_message(policy: ViewPolicy) -> v1::ViewPolicy {
-    match policy {
-        ViewPolicy::Nbv => v1::ViewPolicy::Nbv,
-        ViewPolicy::NbvConstSigma => v1::ViewPolicy::NbvConstSigma,
-        ViewPolicy::Random => v1::ViewPolicy::Random,
-        ViewPolicy::MaxDistance => v1::ViewPolicy::MaxDistance,
-    }
 }
 
 fn state_name(state: i32) -> &'static str {

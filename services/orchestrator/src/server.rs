@@ -98,7 +98,8 @@ pub fn policy_of(value: i32) -> Result<ViewPolicy, ConversionError> {
     }
 }
 
-fn policy_message(policy: ViewPolicy) -> v1::ViewPolicy {
+/// A view policy as its enum value.
+pub fn policy_message(policy: ViewPolicy) -> v1::ViewPolicy {
     match policy {
         ViewPolicy::Nbv => v1::ViewPolicy::Nbv,
         ViewPolicy::NbvConstSigma => v1::ViewPolicy::NbvConstSigma,

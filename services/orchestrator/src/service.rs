@@ -38,7 +38,8 @@ pub struct SessionRequest {
     pub part: PartSource,
     /// The detector's pose, object → world.
     pub initial_t_w_o: Isometry3<f64>,
-    /// Candidate left-camera poses (camera → world); `None`: that many of the camera's own.
+    /// Candidate left-camera poses (camera → world): `Ok` the client's list, `Err(n)` the
+    /// camera's own `n` views.
     pub candidates: Result<Vec<Isometry3<f64>>, usize>,
     pub first_view: usize,
     pub policy: ViewPolicy,

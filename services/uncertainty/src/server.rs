@@ -185,57 +185,7 @@ fn mesh_of(file: &Option<v1::MeshFile>, field: &str) -> Result<TriMesh, Conversi
     Ok(loaded.mesh)
 }
 
-/// A principled material, each parameter in [0, 1].
-pub fn material_from_message(
-    m: &v1::PrincipledMaterial,
-) -> Result<PrincipledParams<f32>, ConversionError> {
-    let values = [
-        ("base_color", m.base_color),
-        ("metallic", m.metallic),
-        ("roughness", m.roughness),
-        ("specular", m.specular),
-        ("spec_tint", m.spec_tint),
-        ("anisotropic", m.anisotropic),
-        ("sheen", m.sheen),
-        ("sheen_tint", m.sheen_tint),
-        ("clearcoat", m.clearcoat),
-        ("clearcoat_gloss", m.clearcoat_gloss),
-    ];
-    if let Some((name, value)) = values.iter().find(|(_, v)| !(0.0..=1.0).contains(v)) {
-        return Err(ConversionError::new(
-            *name,
-            format!("{value} must be a finite number in [0, 1]"),
-        ));
-    }
-    Ok(PrincipledParams {
-        base_color: m.base_color as f32,
-        metallic: m.metallic as f32,
-        roughness: m.roughness as f32,
-        specular: m.specular as f32,
-        spec_tint: m.spec_tint as f32,
-        anisotropic: m.anisotropic as f32,
-        sheen: m.sheen as f32,
-        sheen_tint: m.sheen_tint as f32,
-        clearcoat: m.clearcoat as f32,
-        clearcoat_gloss: m.clearcoat_gloss as f32,
-    })
-}
-
-/// A principled material as its message.
-pub fn material_to_message(p: &PrincipledParams<f32>) -> v1::PrincipledMaterial {
-    v1::PrincipledMaterial {
-        base_color: f64::from(p.base_color),
-        metallic: f64::from(p.metallic),
-        roughness: f64::from(p.roughness),
-        specular: f64::from(p.specular),
-        spec_tint: f64::from(p.spec_tint),
-        anisotropic: f64::from(p.anisotropic),
-        sheen: f64::from(p.sheen),
-        sheen_tint: f64::from(p.sheen_tint),
-        clearcoat: f64::from(p.clearcoat),
-        clearcoat_gloss: f64::from(p.clearcoat_gloss),
-    }
-}
+pub use glint_camera::server::{material_from_message, material_to_message};
 
 /// The rig: the stereo pair and the projector at `t_left_projector` (absent: at the rig's
 /// midpoint, looking along the left camera's +z).
