@@ -11,6 +11,7 @@ use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use nalgebra::Point3;
 use rayon::prelude::*;
 
+mod fanout;
 mod nbv;
 mod refine;
 
@@ -62,12 +63,17 @@ pub enum BenchCommand {
     /// One next-best-view decision: every candidate predicted (render, σ̌_z, Fisher
     /// information), then the entropy plan; time per stage on 1 thread and all cores.
     Nbv(nbv::NbvBenchArgs),
+    /// One decision spread over render-worker processes on loopback (1, 2, 4…) against
+    /// in-process, with the wire's cost per candidate and a model of N machines; or whole
+    /// sessions against a deployment's orchestrator (`--orchestrator`).
+    Fanout(fanout::FanoutBenchArgs),
 }
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
     match cmd {
         BenchCommand::Refine(args) => refine::run(&args),
         BenchCommand::Nbv(args) => nbv::run(&args),
+        BenchCommand::Fanout(args) => fanout::run(&args),
         BenchCommand::Sdf {
             voxel_mm,
             padding_mm,

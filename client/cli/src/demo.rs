@@ -1,24 +1,26 @@
 //! The main job (`cargo run --release` with no arguments): one active pose-refinement session
-//! on a mock bin of a shiny part. Capture, refine, predict every candidate view, choose the
-//! next by minimum entropy, repeat until the entropy threshold or the view budget; a table per
-//! step and a report folder with an `index.html` over its pictures.
+//! on a mock bin of a shiny part, run the way a deployment runs it. It starts `glint serve all`
+//! inside this process on a loopback port and drives it as any client does (`glint session
+//! run`'s code): set up the mock bin, ask a stand-in detector, start the session, print a row
+//! per streamed step. The report — captures, the σ̌_z map the render workers predicted for each
+//! chosen view, an error-and-entropy plot, `index.html` — reads the session from the
+//! orchestrator this process runs.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use glint_camera::record::to_8bit;
-use glint_eval::active::{
-    ActiveScene, ActiveSceneSpec, CONST_SIGMA_Z_M, Masking, deviations, prediction_object,
-    session_config, set_up,
-};
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::parts::Part;
 use glint_geometry::pose_deviation::PoseDeviation;
-use glint_orchestrator::local::{LocalEstimation, LocalPrediction};
-use glint_orchestrator::session::{self, Session, Stages, StepRecord, ViewPolicy};
-use glint_orchestrator::stages::PredictionObject;
+use glint_orchestrator::service::StoredSession;
+use glint_orchestrator::session::{StepRecord, ViewPolicy};
+use glint_orchestrator::stages::{PartCalibration, PredictionRequest, PredictionStage};
+
+use crate::serve_cmd::{AllArgs, CameraArgs, FanOutArgs, InProcessServer};
+use glint_client::{MockSession, RunOutcome, run_mock_session, table_header};
 
 pub const DEFAULT_OUT: &str = "glint-out";
 
@@ -36,12 +38,6 @@ pub struct DemoArgs {
     /// The calibration the entropy policies' render workers use.
     #[command(flatten)]
     pub calibration: crate::calibration_args::CalibrationArgs,
-    /// The render workers render the bin with the part (occlusion by its walls,
-    /// inter-reflection from its floor), beyond the paper: `false` renders the part alone,
-    /// as the paper does. On the Zigzag the bin brings the predicted entropy within 0.3 nats
-    /// of the one reached (1.4 nats optimistic without; `glint eval active`).
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
-    pub predict_bin: bool,
     /// Views at most (the first included).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub max_views: u32,
@@ -49,23 +45,12 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(2..=256))]
     pub candidates: u32,
     /// Parts in the bin.
-    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=64))]
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=40))]
     pub instances: u32,
     /// Stop once the pose is this certain: the entropy of a pose with this standard deviation
     /// in every translation axis (mm) and the same number in every rotation axis (degrees).
     #[arg(long, default_value_t = 0.03)]
     pub stop_sigma_mm_deg: f64,
-    /// The part's pixels in a view: the silhouette of the pose hypothesis grown by this, mm
-    /// (the detector's error), then re-masked at the first refinement with
-    /// --final-mask-margin-mm and refined again.
-    #[arg(long, default_value_t = 10.0)]
-    pub mask_margin_mm: f64,
-    #[arg(long, default_value_t = 3.0)]
-    pub final_mask_margin_mm: f64,
-    /// Depth points within this of the bin's floor (known from the cell's calibration) are
-    /// background, mm.
-    #[arg(long, default_value_t = 2.0)]
-    pub floor_clearance_mm: f64,
     /// Seed of the bin, the detector's error, the captures and the predictions.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -75,6 +60,10 @@ pub struct DemoArgs {
     /// Samples per pixel of the mock camera's renders.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub spp: u32,
+    /// The orchestrator's fan-out and what it knows of the cell (`--cell none`: the render
+    /// workers see the part alone, as the paper renders it).
+    #[command(flatten)]
+    pub fan_out: FanOutArgs,
 }
 
 impl Default for DemoArgs {
@@ -89,227 +78,206 @@ impl Default for DemoArgs {
     }
 }
 
-/// The entropy (nats) of a 6-D Gaussian pose with σ_t metres per translation axis and σ_r
-/// radians per rotation axis: h = 3 ln(2πe) + 3 ln σ_t + 3 ln σ_r (eq 20).
-fn entropy_of_sigmas(sigma_t_m: f64, sigma_r_rad: f64) -> f64 {
-    3.0 * (2.0 * std::f64::consts::PI * std::f64::consts::E).ln()
-        + 3.0 * sigma_t_m.ln()
-        + 3.0 * sigma_r_rad.ln()
-}
-
 pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     anyhow::ensure!(
         args.stop_sigma_mm_deg.is_finite() && args.stop_sigma_mm_deg > 0.0,
         "--stop-sigma-mm-deg: {} must be a positive number",
         args.stop_sigma_mm_deg
     );
-    for (name, mm) in [
-        ("--mask-margin-mm", args.mask_margin_mm),
-        ("--final-mask-margin-mm", args.final_mask_margin_mm),
-        ("--floor-clearance-mm", args.floor_clearance_mm),
-    ] {
-        anyhow::ensure!(
-            mm.is_finite() && (0.0..=100.0).contains(&mm),
-            "{name}: {mm} must be 0 to 100 mm"
-        );
-    }
-    let started = Instant::now();
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let spec = ActiveSceneSpec {
+    // The calibration first: a bad file fails before anything starts.
+    let calibration = if args.policy.prediction(0.0).is_some() {
+        Some(
+            PartCalibration::from_files(&args.calibration.load(args.part)?)
+                .map_err(|e| anyhow::anyhow!("the calibration: {e}"))?,
+        )
+    } else {
+        None
+    };
+    let entropy_threshold_nats = glint_estimation::nbv::entropy_of_axis_sigmas(
+        args.stop_sigma_mm_deg * 1e-3,
+        args.stop_sigma_mm_deg.to_radians(),
+    );
+    let spec = MockSession {
         part: args.part,
         instances: args.instances,
+        policy: args.policy,
+        max_views: args.max_views,
+        entropy_threshold_nats,
+        candidates: args.candidates,
         seed: args.seed,
         width_px: args.resolution.0,
         height_px: args.resolution.1,
         samples_per_pixel: args.spp,
-        candidates: args.candidates as usize,
     };
-    // The calibration first: a bad file fails before the bin is set up.
-    let calibration = if args.policy.prediction(CONST_SIGMA_Z_M).is_some() {
-        Some(args.calibration.load(args.part)?)
-    } else {
-        None
-    };
-    let scene = set_up(&spec)?;
-    let entropy_threshold_nats = entropy_of_sigmas(
-        args.stop_sigma_mm_deg * 1e-3,
-        args.stop_sigma_mm_deg.to_radians(),
-    );
-    let masking = Masking {
-        margin_m: args.mask_margin_mm * 1e-3,
-        final_margin_m: args.final_mask_margin_mm * 1e-3,
-        floor_clearance_m: args.floor_clearance_mm * 1e-3,
-    };
-    let config = session_config(
-        &scene,
-        args.policy,
-        args.max_views as usize,
-        Some(entropy_threshold_nats),
-        args.seed,
-        &masking,
-    )?;
-    let (initial, _) = deviations(&scene, &[]);
-    println!(
-        "Active session: {} (instance {} in a bin of {}), {} candidate views, policy {}, at most \
-         {} views, stop below {entropy_threshold_nats:.1} nats ({} mm/{}° per axis).",
-        args.part.display_name(),
-        scene.target + 1,
-        args.instances,
-        args.candidates,
-        args.policy.name(),
-        args.max_views,
-        args.stop_sigma_mm_deg,
-        args.stop_sigma_mm_deg
-    );
-    println!(
-        "Initial pose: a stand-in detector (ground truth perturbed as in `glint eval refine`), \
-         {:.1} mm / {:.1}° off; the target is {:.0} % visible from the first view.",
-        initial.translation_mm(),
-        initial.rotation_deg(),
-        100.0 * scene.target_visib_fract
-    );
-    println!(
-        "The part's pixels in each view: the silhouette of the pose hypothesis grown by {} mm, \
-         then by {} mm at the first refinement, without points within {} mm of the bin's floor \
-         (no ground-truth masks).",
-        args.mask_margin_mm, args.final_mask_margin_mm, args.floor_clearance_mm
-    );
-    let estimation = LocalEstimation::default();
-    let workers = LocalPrediction::default();
-    let prediction_object = match &calibration {
-        Some(calibration) => Some(prediction_object(&scene, calibration, args.predict_bin)?),
-        None => None,
-    };
-    let stages = Stages {
-        camera: &scene.camera,
-        estimation: &estimation,
-        prediction: prediction_object.as_ref().map(|o| {
-            (
-                &workers as &dyn glint_orchestrator::stages::PredictionStage,
-                o,
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    runtime.block_on(async {
+        let all = AllArgs {
+            camera: CameraArgs::empty(),
+            workers: None,
+            fan_out: args.fan_out.clone(),
+        };
+        let server = InProcessServer::start(&all, Duration::from_secs(10)).await?;
+        println!(
+            "Glint's services (`glint serve all`) on {} in this process; the session runs \
+             through them over gRPC.",
+            server.addr
+        );
+        println!(
+            "Active session: {} in a bin of {}, {} candidate views, policy {}, at most {} views, \
+             stop below {entropy_threshold_nats:.1} nats ({} mm/{}° per axis).",
+            args.part.display_name(),
+            args.instances,
+            args.candidates,
+            args.policy.name(),
+            args.max_views,
+            args.stop_sigma_mm_deg,
+            args.stop_sigma_mm_deg
+        );
+        println!(
+            "The part's pixels in each view: the silhouette of the pose hypothesis, dilated \
+             (no ground-truth masks); errors are against the mock camera's truth, read by this \
+             client only."
+        );
+        let started = Instant::now();
+        let bar = glint_eval::progress::bar(u64::from(args.max_views), "views");
+        let mut rows = vec![table_header()];
+        let addr = server.addr.to_string();
+        let outcome = run_mock_session(&addr, &addr, &spec, calibration.as_ref(), |row, step| {
+            bar.suspend(|| println!("{row}"));
+            if step.is_some() {
+                bar.inc(1);
+                rows.push(row.to_owned());
+            }
+        })
+        .await;
+        bar.finish_and_clear();
+        let outcome = match outcome {
+            Ok(o) => o,
+            Err(e) => {
+                server.stop().await?;
+                return Err(e.context("the session failed"));
+            }
+        };
+        let session_s = started.elapsed().as_secs_f64();
+        println!(
+            "Session {} {} after {} views in {session_s:.1} s: pose error {}.",
+            outcome.session.session_id,
+            glint_proto::v1::SessionState::try_from(outcome.session.state)
+                .map_or("?", |s| s.as_str_name()),
+            outcome.steps.len(),
+            error_summary(&outcome)
+        );
+        let stored = server
+            .orchestrator
+            .stored(&outcome.session.session_id)
+            .map_err(anyhow::Error::msg)?;
+        let orchestrator = server.orchestrator.clone();
+        let out = out.clone();
+        let error = outcome_error(&outcome).map(str::to_owned);
+        let report = tokio::task::spawn_blocking(move || {
+            write_report(
+                &out,
+                &stored,
+                orchestrator.prediction.as_ref(),
+                &outcome,
+                &rows,
             )
-        }),
-    };
-    let mut session = Session::new("demo".into(), config).map_err(anyhow::Error::msg)?;
-    let bar = glint_eval::progress::bar(args.max_views as u64, "views");
-    let header = table_header();
-    bar.suspend(|| println!("{header}"));
-    session::run(
-        &mut session,
-        &scene.object,
-        &stages,
-        |step| {
-            let (_, devs) = deviations(&scene, std::slice::from_ref(step));
-            bar.suspend(|| println!("{}", table_row(step, &devs[0])));
-            bar.inc(1);
-        },
-        || false,
-    )
-    .map_err(anyhow::Error::msg)
-    .context("the session failed")?;
-    bar.finish_and_clear();
-    let session_s = started.elapsed().as_secs_f64();
-    println!(
-        "Session {:?} after {} views in {session_s:.1} s.",
-        session.state,
-        session.steps.len()
-    );
-    let index = write_report(out, &scene, &session, &header, prediction_object.as_ref())?;
-    println!("Report: {}", index.display());
-    Ok(())
+        })
+        .await
+        .context("the report writer panicked")?;
+        server.stop().await?;
+        println!("Report: {}", report?.display());
+        if let Some(e) = error {
+            anyhow::bail!("the session failed: {e}");
+        }
+        Ok(())
+    })
 }
 
-/// The σ̌_z map the render workers predicted for the view chosen after `step` (the same
-/// request as the planner's, with maps), as EXR and PNG at `stem`.
+fn outcome_error(outcome: &RunOutcome) -> Option<&str> {
+    (!outcome.session.error.is_empty()).then_some(outcome.session.error.as_str())
+}
+
+/// "11.9 mm / 5.4° (detector) → 1.5 mm / 3.0°".
+fn error_summary(outcome: &RunOutcome) -> String {
+    let d0 = &outcome.initial_deviation;
+    let mut s = format!(
+        "{:.1} mm / {:.1}° (detector)",
+        d0.translation_mm(),
+        d0.rotation_deg()
+    );
+    if let Some(d) = outcome.deviations.last() {
+        let _ = write!(
+            s,
+            " → {:.2} mm / {:.2}°",
+            d.translation_mm(),
+            d.rotation_deg()
+        );
+    }
+    s
+}
+
+/// The σ̌_z map the render workers predicted for the view chosen after `step` — the very
+/// request of the decision (same pose, candidate index and seed), now with maps — as EXR and
+/// PNG at `stem`.
 fn predicted_map(
-    object: &PredictionObject,
-    predictor: &glint_uncertainty::PredictorObject,
-    session: &Session,
+    stored: &StoredSession,
+    prediction: &dyn PredictionStage,
     step: &StepRecord,
     next: usize,
     stem: &Path,
-) -> anyhow::Result<()> {
-    let settings = glint_uncertainty::PredictionSettings {
-        shots: object.shots,
-        window_radius_px: object.window_radius_px,
-        with_maps: true,
-        ..glint_uncertainty::PredictionSettings::default()
+) -> anyhow::Result<bool> {
+    let (Some(object), Some(sigma)) = (
+        stored.prediction.as_ref(),
+        stored
+            .session
+            .config
+            .policy
+            .prediction(stored.session.config.const_sigma_z_m),
+    ) else {
+        return Ok(false);
     };
-    let prediction = glint_uncertainty::predict_candidate(
-        predictor,
-        &step.t_w_o,
-        &session.config.candidates[next],
-        &settings,
-        glint_uncertainty::candidate_seed(session.config.seed, next as u32),
-    )?;
-    glint_eval::active::write_prediction_maps(&prediction, stem, 0.1e-3)
+    let config = &stored.session.config;
+    let request = PredictionRequest {
+        t_w_o: step.t_w_o,
+        candidates: vec![(next as u32, config.candidates[next])],
+        sigma,
+        seed: config.seed,
+        with_maps: true,
+    };
+    let predicted = prediction
+        .predict(object, &request)
+        .map_err(anyhow::Error::msg)?;
+    let maps = predicted
+        .first()
+        .and_then(|p| p.maps.as_ref())
+        .context("the render worker sent no maps")?;
+    glint_eval::active::write_prediction_maps(&maps.sigma_z_m, &maps.cause, stem, 0.1e-3)?;
+    Ok(true)
 }
 
-/// An entropy with two decimals, or "-" when there is none.
-fn nats_or_dash(h: Option<f64>) -> String {
-    h.map_or_else(|| "-".into(), |h| format!("{h:.2}"))
-}
-
-fn table_header() -> String {
-    format!(
-        "{:>4} {:>5} {:>7} {:>8} {:>10} {:>10} {:>8} {:>7} {:>9} {:>9}  {}",
-        "step",
-        "view",
-        "points",
-        "total",
-        "h_pred",
-        "h",
-        "err_mm",
-        "err_deg",
-        "capture_s",
-        "predict_s",
-        "refine"
-    )
-}
-
-fn table_row(step: &StepRecord, deviation: &PoseDeviation) -> String {
-    format!(
-        "{:>4} {:>5} {:>7} {:>8} {:>10} {:>10.2} {:>8.2} {:>7.2} {:>9.2} {:>9.2}  {}",
-        step.step,
-        step.view,
-        step.view_points,
-        step.total_points,
-        nats_or_dash(step.predicted_entropy_nats),
-        step.entropy_nats,
-        deviation.translation_mm(),
-        deviation.rotation_deg(),
-        step.times.capture_ms * 1e-3,
-        step.times.predict_ms * 1e-3,
-        step.refine_status
-    )
-}
-
-/// Writes the captures, the error-and-entropy plot and `index.html`; returns the index's path.
+/// Writes the captures, the predicted maps, the error-and-entropy plot, the step table and
+/// `index.html`; returns the index's path.
 fn write_report(
     out: &Path,
-    scene: &ActiveScene,
-    session: &Session,
-    header: &str,
-    prediction: Option<&PredictionObject>,
+    stored: &StoredSession,
+    prediction: &dyn PredictionStage,
+    outcome: &RunOutcome,
+    table: &[String],
 ) -> anyhow::Result<PathBuf> {
-    let (initial, devs) = deviations(scene, &session.steps);
+    let session = &stored.session;
+    let devs = &outcome.deviations;
     let captures = out.join("captures");
     std::fs::create_dir_all(&captures)
         .with_context(|| format!("creating {}", captures.display()))?;
+    let bar = glint_eval::progress::bar(session.steps.len() as u64, "report");
     let mut rows = String::new();
-    // The render workers' view of the part, for the predicted maps.
-    let predictor = match prediction {
-        Some(object) => Some(
-            object.predictor(
-                glint_orchestrator::local::SdfCache::default()
-                    .grid(&object.object)
-                    .map_err(anyhow::Error::msg)?,
-            ),
-        ),
-        None => None,
-    };
-    for (step, view) in session.steps.iter().zip(&session.views) {
+    for ((step, view), dev) in session.steps.iter().zip(&session.views).zip(devs) {
         let m = &view.measurement;
         let left = to_8bit(&m.left[0], m.max_dn);
         let left_path = captures.join(format!("step{:02}_left.png", step.step));
@@ -328,15 +296,12 @@ fn write_report(
         let depth_path = captures.join(format!("step{:02}_depth.png", step.step));
         write_file_atomically(&depth_path, &depth_png)
             .with_context(|| format!("writing {}", depth_path.display()))?;
-        let next_map = match (prediction.zip(predictor.as_ref()), step.next_view) {
-            (Some((object, predictor)), Some(next)) => {
-                let stem = captures.join(format!("step{:02}_next_view_sigma", step.step));
-                predicted_map(object, predictor, session, step, next, &stem)?;
-                format!(
-                    "<img src=\"captures/step{:02}_next_view_sigma.png\" height=160>",
-                    step.step
-                )
-            }
+        let stem = captures.join(format!("step{:02}_next_view_sigma", step.step));
+        let next_map = match step.next_view {
+            Some(next) if predicted_map(stored, prediction, step, next, &stem)? => format!(
+                "<img src=\"captures/step{:02}_next_view_sigma.png\" height=160>",
+                step.step
+            ),
             _ => String::new(),
         };
         let _ = writeln!(
@@ -347,35 +312,36 @@ fn write_report(
             step.step,
             step.view,
             step.total_points,
-            nats_or_dash(step.predicted_entropy_nats),
+            step.predicted_entropy_nats
+                .map_or_else(|| "-".into(), |h| format!("{h:.2}")),
             step.entropy_nats,
-            devs[step.step].translation_mm(),
-            devs[step.step].rotation_deg(),
+            dev.translation_mm(),
+            dev.rotation_deg(),
             step.step,
             step.step
         );
+        bar.inc(1);
     }
-    let plot = progress_plot(&initial, &devs, &session.steps)?;
+    bar.finish_and_clear();
+    let plot = progress_plot(&outcome.initial_deviation, devs, &session.steps)?;
     write_file_atomically(&out.join("session.png"), &plot)
         .with_context(|| format!("writing {}", out.join("session.png").display()))?;
-    let mut table = String::from(header);
-    table.push('\n');
-    for (s, d) in session.steps.iter().zip(&devs) {
-        table += &table_row(s, d);
-        table.push('\n');
-    }
+    let table = table.join("\n") + "\n";
     write_file_atomically(&out.join("steps.txt"), table.as_bytes())?;
+    let initial = &outcome.initial_deviation;
     let html = format!(
         "<!doctype html><html><head><meta charset=utf-8><title>Glint active session</title>\
          <style>body{{font-family:sans-serif;margin:2em}}td{{padding:4px;vertical-align:top}}</style></head><body>\
          <h1>Glint: active pose refinement of a {part}</h1>\
-         <p>Policy <b>{policy}</b>, {n} views, state {state:?}. The initial pose comes from a stand-in \
-         detector (ground truth perturbed as in <code>glint eval refine</code>): {e0t:.1} mm / {e0r:.1}° off. \
-         Errors are against the mock camera's ground truth (evaluation only: the session never reads it).</p>\
+         <p>Session {id}, policy <b>{policy}</b>, {n} views, state {state:?}, run through Glint's gRPC \
+         services. The initial pose comes from a stand-in detector (ground truth perturbed as in \
+         <code>glint eval refine</code>): {e0t:.1} mm / {e0r:.1}° off. Errors are against the mock \
+         camera's ground truth (evaluation only: the session never reads it).</p>\
          <img src=\"session.png\"><h2>Steps</h2><pre>{table}</pre>\
          <table><tr><th>step</th><th>view</th><th>points</th><th>h predicted</th><th>h</th><th>error</th>\
          <th>left pattern</th><th>depth</th><th>next view: predicted σ̌_z (0–0.1 mm; red: eq 16, magenta: eq 17, orange: right camera blind)</th></tr>{rows}</table></body></html>",
-        part = scene.object.name,
+        part = stored.object.name,
+        id = session.id,
         policy = session.config.policy.name(),
         n = session.steps.len(),
         state = session.state,

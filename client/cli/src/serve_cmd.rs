@@ -3,9 +3,12 @@
 //! (`GLINT_LISTEN`, `GLINT_TARGET`, `GLINT_DRAIN_TIMEOUT_S`, and the camera's initial scene
 //! `GLINT_CAMERA_PART`, `GLINT_CAMERA_INSTANCES`, …).
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Context;
+use glint_orchestrator::server::OrchestratorServer;
+use glint_orchestrator::service::Orchestrator;
 use glint_server::{HealthStatus, ServeConfig};
 
 #[derive(clap::Args)]
@@ -121,6 +124,18 @@ pub struct CameraArgs {
 }
 
 impl CameraArgs {
+    /// No initial scene: the camera waits for a client's `SetUpScene`.
+    pub fn empty() -> Self {
+        Self {
+            part: None,
+            instances: 8,
+            seed: 1,
+            width_px: 0,
+            height_px: 0,
+            spp: 0,
+        }
+    }
+
     /// The camera server, with the initial scene set up when `--part` is given.
     fn camera(&self) -> anyhow::Result<glint_camera::server::Camera> {
         let camera = glint_camera::server::Camera::new();
@@ -185,9 +200,8 @@ fn orchestrator(
     estimation: &str,
     workers: &str,
     fan_out: &FanOutArgs,
-) -> anyhow::Result<glint_orchestrator::server::OrchestratorServer> {
+) -> anyhow::Result<Arc<Orchestrator>> {
     use glint_orchestrator::remote::{self, prediction};
-    use std::sync::Arc;
     let deadline = seconds("--call-deadline-s", fan_out.call_deadline_s)?;
     anyhow::ensure!(
         deadline > Duration::ZERO,
@@ -214,15 +228,85 @@ fn orchestrator(
         "none" => glint_orchestrator::session::Cell::unknown(),
         _ => glint_orchestrator::session::Cell::standard_bin(),
     };
-    Ok(glint_orchestrator::server::OrchestratorServer::new(
-        Arc::new(glint_orchestrator::service::Orchestrator::new(
-            Arc::new(camera),
-            Arc::new(estimation),
-            Arc::new(pool),
-            cell,
-            Arc::new(glint_orchestrator::service::MemoryStore::default()),
-        )),
-    ))
+    Ok(Arc::new(Orchestrator::new(
+        Arc::new(camera),
+        Arc::new(estimation),
+        Arc::new(pool),
+        cell,
+        Arc::new(glint_orchestrator::service::MemoryStore::default()),
+    )))
+}
+
+/// Every service on one port: the routes, their names, and the orchestrator, which reaches
+/// the other stages (and, without `--workers`, its render worker) through `own`, the port's
+/// address.
+fn all_services(
+    own: &str,
+    all: &AllArgs,
+) -> anyhow::Result<(tonic::service::Routes, Vec<&'static str>, Arc<Orchestrator>)> {
+    let workers = all.workers.as_deref().unwrap_or(own);
+    let orchestrator = orchestrator(own, own, workers, &all.fan_out)?;
+    let routes = all
+        .camera
+        .camera()?
+        .into_routes()
+        .add_service(glint_calibration::server::Calibration.into_service())
+        .add_service(glint_uncertainty::server::Uncertainty::default().into_service())
+        .add_service(glint_estimation::server::Estimation::default().into_service())
+        .add_service(OrchestratorServer::new(orchestrator.clone()).into_service());
+    let mut services = glint_camera::server::SERVICE_NAMES.to_vec();
+    services.extend([
+        glint_calibration::server::SERVICE_NAME,
+        glint_uncertainty::server::SERVICE_NAME,
+        glint_estimation::server::SERVICE_NAME,
+        glint_orchestrator::server::SERVICE_NAME,
+    ]);
+    Ok((routes, services, orchestrator))
+}
+
+/// `glint serve all` inside this process on a free loopback port (the demo's deployment).
+pub struct InProcessServer {
+    pub addr: std::net::SocketAddr,
+    /// The orchestrator the server runs, for readers in this process.
+    pub orchestrator: Arc<Orchestrator>,
+    stop: tokio::sync::oneshot::Sender<()>,
+    task: tokio::task::JoinHandle<Result<(), glint_server::ServerError>>,
+}
+
+impl InProcessServer {
+    /// Binds 127.0.0.1:0 and serves every service there until [`Self::stop`].
+    pub async fn start(all: &AllArgs, drain_timeout: Duration) -> anyhow::Result<Self> {
+        let listener = glint_server::bind("127.0.0.1:0").await?;
+        let addr = listener.local_addr()?;
+        let (routes, services, orchestrator) = all_services(&addr.to_string(), all)?;
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let task = tokio::spawn(glint_server::serve(
+            listener,
+            routes,
+            ServeConfig {
+                services,
+                drain_timeout,
+            },
+            async {
+                let _ = stopped.await;
+            },
+        ));
+        Ok(Self {
+            addr,
+            orchestrator,
+            stop,
+            task,
+        })
+    }
+
+    /// Stops serving (health NOT_SERVING, open calls drained within the bound) and waits.
+    pub async fn stop(self) -> anyhow::Result<()> {
+        let _ = self.stop.send(());
+        self.task
+            .await
+            .context("the in-process server panicked")??;
+        Ok(())
+    }
 }
 
 pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
@@ -255,34 +339,27 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
             ),
             Stage::Orchestrator(o) => (
                 tonic::service::Routes::new(
-                    orchestrator(&o.camera, &o.estimation, &o.workers, &o.fan_out)?.into_service(),
+                    OrchestratorServer::new(orchestrator(
+                        &o.camera,
+                        &o.estimation,
+                        &o.workers,
+                        &o.fan_out,
+                    )?)
+                    .into_service(),
                 ),
                 vec![glint_orchestrator::server::SERVICE_NAME],
             ),
             Stage::All(all) => {
-                // The orchestrator reaches every stage through this very port.
-                let own = listener.local_addr()?.to_string();
-                let workers = all.workers.clone().unwrap_or_else(|| own.clone());
-                let routes = all
-                    .camera
-                    .camera()?
-                    .into_routes()
-                    .add_service(glint_calibration::server::Calibration.into_service())
-                    .add_service(glint_uncertainty::server::Uncertainty::default().into_service())
-                    .add_service(glint_estimation::server::Estimation::default().into_service())
-                    .add_service(orchestrator(&own, &own, &workers, &all.fan_out)?.into_service());
-                let mut services = glint_camera::server::SERVICE_NAMES.to_vec();
-                services.extend([
-                    glint_calibration::server::SERVICE_NAME,
-                    glint_uncertainty::server::SERVICE_NAME,
-                    glint_estimation::server::SERVICE_NAME,
-                    glint_orchestrator::server::SERVICE_NAME,
-                ]);
+                let (routes, services, _) = all_services(&listener.local_addr()?.to_string(), all)?;
                 (routes, services)
             }
         };
         // The bound address on stdout, so a script that passed port 0 can read it.
-        println!("listening on {}", listener.local_addr()?);
+        println!(
+            "{}{}",
+            glint_server::process::LISTENING_PREFIX,
+            listener.local_addr()?
+        );
         glint_server::serve(
             listener,
             routes,

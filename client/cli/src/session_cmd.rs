@@ -3,19 +3,17 @@
 //! (the mock's ground truth perturbed, evaluation only), starts a session and prints a row per
 //! step as the orchestrator streams it, with the pose error against the mock's truth.
 
-use std::time::Duration;
-
 use anyhow::Context;
-use glint_eval::active::stand_in_detector;
+use glint_client::{
+    MockSession, channel, run_mock_session, state_name, status, table_header, table_row,
+};
 use glint_geometry::Part;
-use glint_geometry::pose_deviation::{PoseDeviation, pose_deviation};
-use glint_orchestrator::server::policy_message;
 use glint_orchestrator::session::ViewPolicy;
+use glint_orchestrator::stages::PartCalibration;
 use glint_proto::v1;
-use glint_proto::v1::mock_camera_service_client::MockCameraServiceClient;
 use glint_proto::v1::orchestrator_service_client::OrchestratorServiceClient;
-use nalgebra::Isometry3;
-use tonic::transport::Channel;
+
+use crate::calibration_args::CalibrationArgs;
 
 #[derive(clap::Args)]
 pub struct SessionArgs {
@@ -72,225 +70,28 @@ pub struct RunArgs {
     pub resolution: (u32, u32),
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=1024))]
     pub spp: u32,
+    /// The part's calibration for the render workers; without it, the orchestrator uses the
+    /// one Glint ships for the part (the Zigzag's).
+    #[command(flatten)]
+    pub calibration: CalibrationArgs,
 }
 
-fn uri(addr: &str) -> String {
-    if addr.contains("://") {
-        addr.to_owned()
-    } else {
-        format!("http://{addr}")
-    }
-}
-
-async fn channel(addr: &str) -> anyhow::Result<Channel> {
-    let target = uri(addr);
-    tonic::transport::Endpoint::from_shared(target.clone())
-        .with_context(|| format!("{addr}: not an address; give HOST:PORT"))?
-        .connect_timeout(Duration::from_secs(5))
-        .connect()
-        .await
-        .with_context(|| format!("connecting to {target}"))
-}
-
-fn status(e: tonic::Status) -> anyhow::Error {
-    anyhow::anyhow!("{}: {}", e.code(), e.message())
-}
-
-/// An entropy with two decimals, or "-" when there is none (NaN on the wire).
-fn nats_or_dash(h: f64) -> String {
-    if h.is_finite() {
-        format!("{h:.2}")
-    } else {
-        "-".into()
-    }
-}
-
-/// The per-step table's header, for `glint session run` and the demo.
-pub fn table_header() -> String {
-    format!(
-        "{:>4} {:>5} {:>7} {:>8} {:>10} {:>10} {:>8} {:>7} {:>9} {:>9} {:>9}  {}",
-        "step",
-        "view",
-        "points",
-        "total",
-        "h_pred",
-        "h",
-        "err_mm",
-        "err_deg",
-        "capture_s",
-        "refine_s",
-        "predict_s",
-        "refine"
-    )
-}
-
-/// One step's row; `deviation` is the pose error against the truth, when known.
-pub fn table_row(step: &v1::SessionStep, deviation: Option<&PoseDeviation>) -> String {
-    let times = step.times.unwrap_or_default();
-    let (mm, deg) = deviation.map_or_else(
-        || ("-".to_owned(), "-".to_owned()),
-        |d| {
-            (
-                format!("{:.2}", d.translation_mm()),
-                format!("{:.2}", d.rotation_deg()),
-            )
-        },
-    );
-    format!(
-        "{:>4} {:>5} {:>7} {:>8} {:>10} {:>10.2} {:>8} {:>7} {:>9.2} {:>9.2} {:>9.2}  {}",
-        step.step,
-        step.view,
-        step.view_points,
-        step.total_points,
-        nats_or_dash(step.predicted_entropy_nats),
-        step.entropy_nats,
-        mm,
-        deg,
-        times.capture_ms * 1e-3,
-        times.refine_ms * 1e-3,
-        times.predict_ms * 1e-3,
-        step.refine_status
-    )
-}
-
-/// What a run gives: the steps, the final session, and the truth it was scored against.
-pub struct RunOutcome {
-    pub steps: Vec<v1::SessionStep>,
-    pub session: v1::Session,
-    pub deviations: Vec<PoseDeviation>,
-    pub initial_deviation: PoseDeviation,
-}
-
-fn pose(p: &Option<v1::Pose>, what: &str) -> anyhow::Result<Isometry3<f64>> {
-    Isometry3::try_from(
-        p.as_ref()
-            .with_context(|| format!("the server sent no {what}"))?,
-    )
-    .map_err(|e| anyhow::anyhow!("the server's {what}: {e}"))
-}
-
-/// Sets up the mock bin, asks the stand-in detector, runs a session on the orchestrator;
-/// `on_row` gets each printed row.
-pub async fn run_remote(
-    orchestrator: &str,
-    args: &RunArgs,
-    mut on_row: impl FnMut(&str),
-) -> anyhow::Result<RunOutcome> {
-    let camera_addr = args.camera.as_deref().unwrap_or(orchestrator);
-    let mut mock = MockCameraServiceClient::new(channel(camera_addr).await?);
-    let mut client = OrchestratorServiceClient::new(channel(orchestrator).await?);
-    mock.set_up_scene(v1::SetUpSceneRequest {
-        part: Some(v1::PartSpec {
-            part: Some(v1::part_spec::Part::Builtin(args.part.name().into())),
-        }),
-        instances: args.instances,
-        material: None,
-        seed: args.seed,
-        width_px: args.resolution.0,
-        height_px: args.resolution.1,
-        samples_per_pixel: args.spp,
-    })
-    .await
-    .map_err(status)
-    .context("setting up the mock bin")?;
-    // The session's candidates are the camera's own; the detector looked from the first.
-    let mut camera =
-        v1::camera_service_client::CameraServiceClient::new(channel(camera_addr).await?);
-    let candidates = camera
-        .list_candidate_views(v1::ListCandidateViewsRequest {
-            count: args.candidates,
-            ..Default::default()
-        })
-        .await
-        .map_err(status)?
-        .into_inner()
-        .t_w_c;
-    let first_t_w_c = pose(&candidates.first().cloned(), "first candidate")?;
-    let truth = mock
-        .get_ground_truth(v1::GetGroundTruthRequest {
-            visibility_from_t_w_c: Some((&first_t_w_c).into()),
-        })
-        .await
-        .map_err(status)?
-        .into_inner();
-    let gt: Vec<Isometry3<f64>> = truth
-        .t_w_o
-        .iter()
-        .map(|p| pose(&Some(p.clone()), "ground-truth pose"))
-        .collect::<Result<_, _>>()?;
-    let visibility: Vec<(f64, f64)> = truth
-        .visibility
-        .iter()
-        .map(|v| (v.visib_fract, f64::from(v.px_count_all)))
-        .collect();
-    let symmetry = args.part.symmetry();
-    let guess = stand_in_detector(&gt, &visibility, &first_t_w_c, &symmetry, args.seed)
-        .context("the mock bin holds no instance")?;
-    let gt_t_w_o = gt[guess.target];
-    let deviation = |t: &Isometry3<f64>| pose_deviation(t, &gt_t_w_o, &symmetry);
-    let initial_deviation = deviation(&guess.initial_t_w_o);
-    on_row(&format!(
-        "Initial pose: a stand-in detector (ground truth perturbed as in `glint eval refine`), \
-         {:.1} mm / {:.1}° off; instance {} of {}, {:.0} % visible from the first view.",
-        initial_deviation.translation_mm(),
-        initial_deviation.rotation_deg(),
-        guess.target + 1,
-        gt.len(),
-        100.0 * guess.visib_fract
-    ));
-    let id = client
-        .start_session(v1::StartSessionRequest {
-            part: Some(v1::PartSpec {
-                part: Some(v1::part_spec::Part::Builtin(args.part.name().into())),
-            }),
-            initial_t_w_o: Some((&guess.initial_t_w_o).into()),
-            candidates_t_w_c: candidates,
-            policy: policy_message(args.policy) as i32,
-            max_views: args.max_views,
-            entropy_threshold_nats: args.entropy_threshold_nats,
-            seed: args.seed,
-            ..Default::default()
-        })
-        .await
-        .map_err(status)
-        .context("starting the session")?
-        .into_inner()
-        .session_id;
-    on_row(&format!("Session {id}, policy {}.", args.policy.name()));
-    on_row(&table_header());
-    let mut stream = client
-        .run_session(v1::RunSessionRequest {
-            session_id: id.clone(),
-        })
-        .await
-        .map_err(status)?
-        .into_inner();
-    let mut steps = Vec::new();
-    let mut deviations = Vec::new();
-    let mut finished = None;
-    while let Some(event) = stream.message().await.map_err(status)? {
-        match event.event {
-            Some(v1::session_event::Event::Step(step)) => {
-                let d = deviation(&pose(&step.t_w_o, "step pose")?);
-                on_row(&table_row(&step, Some(&d)));
-                deviations.push(d);
-                steps.push(step);
-            }
-            Some(v1::session_event::Event::Finished(session)) => finished = Some(session),
-            None => {}
+impl RunArgs {
+    /// The session these flags ask for.
+    pub fn spec(&self) -> MockSession {
+        MockSession {
+            part: self.part,
+            instances: self.instances,
+            policy: self.policy,
+            max_views: self.max_views,
+            entropy_threshold_nats: self.entropy_threshold_nats,
+            candidates: self.candidates,
+            seed: self.seed,
+            width_px: self.resolution.0,
+            height_px: self.resolution.1,
+            samples_per_pixel: self.spp,
         }
     }
-    let session = finished.context("the session's stream ended without its final state")?;
-    Ok(RunOutcome {
-        steps,
-        session,
-        deviations,
-        initial_deviation,
-    })
-}
-
-fn state_name(state: i32) -> &'static str {
-    v1::SessionState::try_from(state).map_or("?", |s| s.as_str_name())
 }
 
 fn session_line(s: &v1::Session) -> String {
@@ -314,7 +115,21 @@ pub fn run(args: &SessionArgs) -> anyhow::Result<()> {
     runtime.block_on(async {
         match &args.command {
             SessionCommand::Run(run) => {
-                let outcome = run_remote(&args.orchestrator, run, |row| println!("{row}")).await?;
+                let calibration = match (&run.calibration.material, &run.calibration.response) {
+                    (Some(_), Some(_)) => Some(
+                        PartCalibration::from_files(&run.calibration.load(run.part)?)
+                            .map_err(|e| anyhow::anyhow!("--material, --response: {e}"))?,
+                    ),
+                    _ => None,
+                };
+                let outcome = run_mock_session(
+                    &args.orchestrator,
+                    run.camera.as_deref().unwrap_or(&args.orchestrator),
+                    &run.spec(),
+                    calibration.as_ref(),
+                    |row, _| println!("{row}"),
+                )
+                .await?;
                 println!("{}", session_line(&outcome.session));
                 if let Some(last) = outcome.deviations.last() {
                     println!(

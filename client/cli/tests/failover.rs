@@ -3,9 +3,9 @@
 //! is killed (SIGKILL) in the middle of the decision; a worker that comes back on its address
 //! is used again.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
+
+mod common;
 
 use glint_eval::active::{ActiveSceneSpec, Calibration, prediction_object, set_up};
 use glint_geometry::Part;
@@ -15,37 +15,6 @@ use glint_orchestrator::stages::{
     EstimationStage, PredictionRequest, PredictionSigma, PredictionStage,
 };
 use nalgebra::Matrix6;
-
-/// A worker process and the address it listens on.
-struct Worker {
-    child: Child,
-    addr: String,
-}
-
-fn start_worker(listen: &str) -> Worker {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_glint"))
-        .args(["serve", "uncertainty", "--listen", listen])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("glint serve uncertainty starts");
-    let stdout = child.stdout.take().unwrap();
-    let mut line = String::new();
-    BufReader::new(stdout).read_line(&mut line).unwrap();
-    let addr = line
-        .trim()
-        .strip_prefix("listening on ")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .to_owned();
-    Worker { child, addr }
-}
-
-impl Drop for Worker {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
 
 #[test]
 fn a_decision_survives_a_worker_killed_mid_way_and_a_returning_worker_is_used_again() {
@@ -79,8 +48,8 @@ fn a_decision_survives_a_worker_killed_mid_way_and_a_returning_worker_is_used_ag
         .predict(&object, &request)
         .unwrap();
 
-    let a = start_worker("127.0.0.1:0");
-    let b = start_worker("127.0.0.1:0");
+    let a = common::serve(&["uncertainty", "--listen", "127.0.0.1:0"]);
+    let b = common::serve(&["uncertainty", "--listen", "127.0.0.1:0"]);
     let runtime = tokio::runtime::Runtime::new().unwrap();
     let pool = RemotePrediction::new(
         runtime.handle().clone(),
@@ -146,7 +115,7 @@ fn a_decision_survives_a_worker_killed_mid_way_and_a_returning_worker_is_used_ag
 
     // Worker a comes back on its address: the next decision uses it again.
     drop(a);
-    let a = start_worker(&a_addr);
+    let a = common::serve(&["uncertainty", "--listen", &a_addr]);
     std::thread::sleep(Duration::from_millis(300)); // past retry_after
     let before = pool
         .stats()

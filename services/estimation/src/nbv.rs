@@ -109,6 +109,15 @@ pub fn pose_entropy_nats(information: &Matrix6<f64>, prior: &PosePrior) -> Resul
     Ok(0.5 * (6.0 * (2.0 * std::f64::consts::PI * std::f64::consts::E).ln() - ln_det))
 }
 
+/// The entropy (nats, eq 20) of a pose known to `sigma_t_m` metres in each translation axis
+/// and `sigma_r_rad` radians in each rotation axis, independently:
+/// `3 ln 2πe + 3 ln σ_t + 3 ln σ_r`. A stopping threshold stated as a tolerance.
+pub fn entropy_of_axis_sigmas(sigma_t_m: f64, sigma_r_rad: f64) -> f64 {
+    3.0 * (2.0 * std::f64::consts::PI * std::f64::consts::E).ln()
+        + 3.0 * sigma_t_m.ln()
+        + 3.0 * sigma_r_rad.ln()
+}
+
 /// A minimum-entropy plan.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Plan {
@@ -222,6 +231,19 @@ mod tests {
     use nalgebra::{Translation3, UnitQuaternion, Vector6};
 
     const LN_2PI_E: f64 = 2.837_877_066_409_345_5; // ln(2πe)
+
+    #[test]
+    fn axis_sigmas_give_the_entropy_of_their_information() {
+        // A pose known to σ_t, σ_r per axis has F = diag(σ_t⁻² ×3, σ_r⁻² ×3): the prior's
+        // form, so a prior of those σ with zero measured information has that entropy.
+        let (sigma_t_m, sigma_r_rad) = (0.1e-3, 0.1f64.to_radians());
+        let prior = PosePrior {
+            sigma_translation_m: sigma_t_m,
+            sigma_rotation_rad: sigma_r_rad,
+        };
+        let h = pose_entropy_nats(&Matrix6::zeros(), &prior).unwrap();
+        assert!((entropy_of_axis_sigmas(sigma_t_m, sigma_r_rad) - h).abs() < 1e-9 * h.abs());
+    }
 
     #[test]
     fn entropy_of_a_diagonal_information_is_the_closed_form() {

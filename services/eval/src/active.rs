@@ -8,6 +8,7 @@ use std::sync::Arc;
 use anyhow::Context;
 use glint_camera::setup::{BinSetup, BinSetupSpec};
 use glint_camera::visibility::instance_visibility;
+use glint_geometry::image::Image;
 use glint_geometry::pose_deviation::{PoseDeviation, pose_deviation};
 use glint_geometry::{Part, Symmetry};
 use glint_orchestrator::local::MockCamera;
@@ -245,16 +246,21 @@ pub const MISSING_RGB: [(PixelCause, [u8; 3]); 4] = [
 
 /// Writes a candidate's predicted σ̌_z over its crop as `<stem>.exr` (channel `sigma_z_m`,
 /// metres, NaN off the part) and `<stem>.png` (kept pixels on the colour ramp from 0 to
-/// `scale_max_m`, missing ones in [`MISSING_RGB`] by cause). Needs a prediction made with
-/// maps.
+/// `scale_max_m`, missing ones in [`MISSING_RGB`] by `cause`, a [`PixelCause`] per pixel).
 pub fn write_prediction_maps(
-    prediction: &glint_uncertainty::CandidatePrediction,
+    sigma: &Image<f32>,
+    cause: &Image<u8>,
     stem: &Path,
     scale_max_m: f64,
 ) -> anyhow::Result<()> {
-    let (Some(sigma), Some(cause)) = (&prediction.sigma_z_m, &prediction.cause) else {
-        anyhow::bail!("the prediction was made without maps");
-    };
+    anyhow::ensure!(
+        (sigma.width(), sigma.height()) == (cause.width(), cause.height()),
+        "the σ̌_z map is {}×{} px and its cause map {}×{}",
+        sigma.width(),
+        sigma.height(),
+        cause.width(),
+        cause.height()
+    );
     glint_render::exr_io::write_exr(&stem.with_extension("exr"), &[("sigma_z_m", sigma)])?;
     let rgb: Vec<u8> = sigma
         .data()
@@ -519,8 +525,9 @@ mod tests {
         .unwrap();
         let dir = tempfile::tempdir().unwrap();
         let stem = dir.path().join("map");
-        write_prediction_maps(&p, &stem, 0.1e-3).unwrap();
         let sigma = p.sigma_z_m.as_ref().unwrap();
+        let cause = p.cause.as_ref().unwrap();
+        write_prediction_maps(sigma, cause, &stem, 0.1e-3).unwrap();
         let channels = glint_render::exr_io::read_exr(&stem.with_extension("exr")).unwrap();
         assert_eq!(channels[0].0, "sigma_z_m");
         let read = &channels[0].1;
@@ -536,11 +543,10 @@ mod tests {
         );
         let png = image::open(stem.with_extension("png")).unwrap();
         assert_eq!((png.width(), png.height()), (sigma.width(), sigma.height()));
-        // Without maps there is nothing to write, and the error says so.
-        let bare = glint_uncertainty::CandidatePrediction {
-            sigma_z_m: None,
-            ..p
-        };
-        assert!(write_prediction_maps(&bare, &stem, 0.1e-3).is_err());
+        // Maps of different sizes are refused, and nothing is written.
+        let other = dir.path().join("other");
+        let small = Image::new(1, 1, vec![0u8]).unwrap();
+        assert!(write_prediction_maps(sigma, &small, &other, 0.1e-3).is_err());
+        assert!(!other.with_extension("png").exists());
     }
 }

@@ -15,9 +15,9 @@ use nalgebra::{Isometry3, Matrix6};
 use rayon::prelude::*;
 
 use crate::stages::{
-    CameraInfo, CameraStage, CandidateInformation, CapturedView, EstimationStage, PredictionObject,
-    PredictionRequest, PredictionSigma, PredictionStage, RefineSettings, Refinement, SessionObject,
-    StageError, ViewPlan,
+    CameraInfo, CameraStage, CandidateInformation, CapturedView, EstimationStage, PredictedMaps,
+    PredictionObject, PredictionRequest, PredictionSigma, PredictionStage, RefineSettings,
+    Refinement, SessionObject, StageError, ViewPlan,
 };
 use glint_uncertainty::{
     PredictionError, PredictionSettings, SigmaModel, candidate_seed, predict_candidate,
@@ -180,8 +180,13 @@ impl PredictionStage for LocalPrediction {
                     missing_ratio: p.counts.missing_ratio,
                     missing_sigma: p.counts.missing_sigma,
                     not_in_view: p.not_in_view,
-                    sigma_z_m: match (p.sigma_z_m, p.crop) {
-                        (Some(map), Some(crop)) => Some((map, crop.u_min, crop.v_min)),
+                    maps: match (p.sigma_z_m, p.cause, p.crop) {
+                        (Some(sigma_z_m), Some(cause), Some(crop)) => Some(PredictedMaps {
+                            sigma_z_m,
+                            cause,
+                            roi_u0_px: crop.u_min,
+                            roi_v0_px: crop.v_min,
+                        }),
                         _ => None,
                     },
                     predict_ms: started.elapsed().as_secs_f64() * 1e3,

@@ -278,6 +278,14 @@ impl Orchestrator {
         self.store.get(id).ok().flatten().map(|s| s.object.name)
     }
 
+    /// A session with its captures and the render workers' object, for readers in the same
+    /// process (the demo's report).
+    pub fn stored(&self, id: &str) -> Result<StoredSession, StageError> {
+        self.store
+            .get(id)?
+            .ok_or_else(|| StageError::NotFound(format!("session_id: no session {id:?}")))
+    }
+
     /// A session without its captures.
     pub fn get(&self, id: &str) -> Result<Session, StageError> {
         let stored = self

@@ -146,9 +146,21 @@ pub struct CandidateInformation {
     pub missing_ratio: u32,
     pub missing_sigma: u32,
     pub not_in_view: bool,
-    /// The predicted σ_z map over the region of interest and its top-left pixel, when asked.
-    pub sigma_z_m: Option<(Image<f32>, u32, u32)>,
+    /// The predicted σ̌_z map and each pixel's cause over the region of interest, when asked.
+    pub maps: Option<PredictedMaps>,
     pub predict_ms: f64,
+}
+
+/// A candidate's predicted maps over its region of interest (eq 16–17).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PredictedMaps {
+    /// σ̌_z, metres; NaN where no depth is predicted.
+    pub sigma_z_m: Image<f32>,
+    /// Why: a [`glint_uncertainty::PixelCause`] per pixel, as its `u8`.
+    pub cause: Image<u8>,
+    /// The region's top-left pixel in the camera's image.
+    pub roi_u0_px: u32,
+    pub roi_v0_px: u32,
 }
 
 /// How a prediction models depth uncertainty.

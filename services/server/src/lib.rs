@@ -6,12 +6,15 @@
 //!   the stage's services SERVING while up and NOT_SERVING as soon as shutdown begins, then
 //!   drains connections within [`ServeConfig::drain_timeout`];
 //! - [`healthcheck`]: the client behind `glint healthcheck` (and container probes);
+//! - [`process::ServerProcess`]: a server as a child process (benchmarks, tests);
 //! - [`blocking`]: runs a synchronous library call on tokio's blocking pool, turning a panic
 //!   into INTERNAL instead of a dead worker.
 //!
 //! Nothing here knows a stage's domain; nothing in a stage's library knows this crate.
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+
+pub mod process;
 
 use std::future::Future;
 use std::net::SocketAddr;

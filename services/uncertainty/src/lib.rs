@@ -19,7 +19,7 @@ pub mod response;
 pub mod server;
 
 pub use predict::{
-    CandidatePrediction, KnownSurface, MissingCounts, PredictionError, PredictionSettings,
-    PredictorObject, SigmaModel, candidate_seed, predict_candidate,
+    CandidatePrediction, KnownSurface, MissingCounts, PixelCause, PredictionError,
+    PredictionSettings, PredictorObject, SigmaModel, candidate_seed, predict_candidate,
 };
 pub use response::CalibratedCamera;

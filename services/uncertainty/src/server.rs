@@ -486,6 +486,17 @@ fn sigma_map_message(map: &Image<f32>) -> v1::Image {
     }
 }
 
+/// The cause of each σ̌_z map pixel ([`crate::PixelCause`] as `u8`) as a MONO8 image.
+fn cause_map_message(cause: &Image<u8>) -> v1::Image {
+    v1::Image {
+        width_px: cause.width(),
+        height_px: cause.height(),
+        encoding: v1::ImageEncoding::Mono8 as i32,
+        pixel_space: v1::PixelSpace::Unspecified as i32,
+        data: cause.data().to_vec(),
+    }
+}
+
 /// The poses of a prediction request, validated.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CandidatePoses {
@@ -594,12 +605,16 @@ impl UncertaintyService for Uncertainty {
                         candidate_seed(seed, *index),
                     )
                     .map_err(|e| status_of(e, i))?;
-                    let (sigma_z_m, roi_u0_px, roi_v0_px) = match (&p.sigma_z_m, p.crop) {
-                        (Some(map), Some(crop)) => {
-                            (Some(sigma_map_message(map)), crop.u_min, crop.v_min)
-                        }
-                        _ => (None, 0, 0),
-                    };
+                    let (sigma_z_m, missing_cause, roi_u0_px, roi_v0_px) =
+                        match (&p.sigma_z_m, &p.cause, p.crop) {
+                            (Some(map), Some(cause), Some(crop)) => (
+                                Some(sigma_map_message(map)),
+                                Some(cause_map_message(cause)),
+                                crop.u_min,
+                                crop.v_min,
+                            ),
+                            _ => (None, None, 0, 0),
+                        };
                     Ok(v1::CandidatePrediction {
                         candidate_index: *index,
                         information: Some((&p.information).into()),
@@ -614,6 +629,7 @@ impl UncertaintyService for Uncertainty {
                         roi_v0_px,
                         predict_ms: started.elapsed().as_secs_f64() * 1e3,
                         missing_right_occluded: p.counts.right_occluded,
+                        missing_cause,
                     })
                 })
                 .collect::<Result<Vec<_>, Status>>()

@@ -1,8 +1,6 @@
-//! [`CameraStage`] over `glint.v1.CameraService`: the rig from `GetRig` (asked once, then
-//! cached), captures from `Capture` streams reassembled into the [`CapturedView`] the in-process
+//! [`CameraStage`] over `glint.v1.CameraService`: the rig from `GetRig` (asked before every
+//! session and capture, so a camera set up anew is seen), captures from `Capture` streams reassembled into the [`CapturedView`] the in-process
 //! [`crate::local::MockCamera`] returns for the same scene, pose and seed.
-
-use std::sync::OnceLock;
 
 use glint_camera::server::{DEPTH_ARRAY, NOISE_ARRAYS, left_array_name, right_array_name};
 use glint_estimation::view::ViewMeasurement;
@@ -22,10 +20,6 @@ pub struct RemoteCamera {
     handle: Handle,
     endpoint: Endpoint,
     client: CameraServiceClient<Channel>,
-    /// `GetRig`'s answer, asked on first use. A camera whose rig changes (the mock set up anew
-    /// at another resolution) needs a new `RemoteCamera`; captures that disagree with the
-    /// cached rig fail instead of mixing them.
-    info: OnceLock<CameraInfo>,
 }
 
 /// A reply the camera should not have sent (a server bug, not the caller's input).
@@ -46,7 +40,6 @@ impl RemoteCamera {
             handle,
             endpoint,
             client: CameraServiceClient::new(channel),
-            info: OnceLock::new(),
         })
     }
 
@@ -152,7 +145,7 @@ pub fn view_from_arrays(
             Ok(())
         } else {
             Err(StageError::FailedPrecondition(format!(
-                "the camera's {name:?} is {width}x{height} px but its rig (GetRig, cached) is {}x{} px: the scene changed; make a new RemoteCamera",
+                "the camera's {name:?} is {width}x{height} px but its rig (GetRig) is {}x{} px: the scene changed during the capture; try again",
                 k.width_px, k.height_px
             )))
         }
@@ -214,12 +207,11 @@ pub fn view_from_arrays(
 }
 
 impl CameraStage for RemoteCamera {
+    /// `GetRig`, asked anew each time: a mock set up again at another resolution serves the
+    /// next session without a restart (a capture that disagrees with the rig asked just
+    /// before it fails instead of mixing them).
     fn info(&self) -> Result<CameraInfo, StageError> {
-        if let Some(info) = self.info.get() {
-            return Ok(*info);
-        }
-        let info = self.fetch_info()?;
-        Ok(*self.info.get_or_init(|| info))
+        self.fetch_info()
     }
 
     fn candidate_views(&self, count: usize) -> Result<Vec<Isometry3<f64>>, StageError> {

@@ -32,8 +32,8 @@ use tonic::transport::Channel;
 
 use super::{Endpoint, request, stage_error};
 use crate::stages::{
-    CandidateInformation, PredictionObject, PredictionRequest, PredictionSigma, PredictionStage,
-    StageError,
+    CandidateInformation, PredictedMaps, PredictionObject, PredictionRequest, PredictionSigma,
+    PredictionStage, StageError,
 };
 
 /// Where the render workers are.
@@ -395,22 +395,45 @@ impl RemotePrediction {
     }
 }
 
-/// A FLOAT32 σ̌_z map as an image; NaN (missing) samples are kept.
-fn sigma_map(image: &v1::Image) -> Result<Image<f32>, StageError> {
-    let bad = |m: &str| StageError::Internal(format!("a worker's sigma_z_m map: {m}"));
-    if image.encoding != v1::ImageEncoding::Float32Le as i32 {
-        return Err(bad("not FLOAT32"));
+/// A worker's σ̌_z map (FLOAT32, NaN where missing, kept) and its cause map (MONO8 of the
+/// same size).
+fn predicted_maps(
+    sigma: &v1::Image,
+    cause: Option<&v1::Image>,
+    roi_u0_px: u32,
+    roi_v0_px: u32,
+) -> Result<PredictedMaps, StageError> {
+    let bad = |m: &str| StageError::Internal(format!("a worker's {m}"));
+    if sigma.encoding != v1::ImageEncoding::Float32Le as i32 {
+        return Err(bad("sigma_z_m map is not FLOAT32"));
     }
-    let n = image.width_px as usize * image.height_px as usize;
-    if image.data.len() != 4 * n {
-        return Err(bad("its size is not 4 bytes per pixel"));
+    let n = sigma.width_px as usize * sigma.height_px as usize;
+    if sigma.data.len() != 4 * n {
+        return Err(bad("sigma_z_m map is not 4 bytes per pixel"));
     }
-    let samples = image
+    let samples = sigma
         .data
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
-    Image::new(image.width_px, image.height_px, samples).map_err(|e| bad(&e.to_string()))
+    let sigma_z_m = Image::new(sigma.width_px, sigma.height_px, samples)
+        .map_err(|e| bad(&format!("sigma_z_m map: {e}")))?;
+    let cause = cause.ok_or_else(|| bad("prediction has a sigma_z_m map but no missing_cause"))?;
+    if cause.encoding != v1::ImageEncoding::Mono8 as i32
+        || (cause.width_px, cause.height_px) != (sigma.width_px, sigma.height_px)
+    {
+        return Err(bad(
+            "missing_cause map is not MONO8 of the sigma_z_m map's size",
+        ));
+    }
+    let cause = Image::new(cause.width_px, cause.height_px, cause.data.to_vec())
+        .map_err(|e| bad(&format!("missing_cause map: {e}")))?;
+    Ok(PredictedMaps {
+        sigma_z_m,
+        cause,
+        roi_u0_px,
+        roi_v0_px,
+    })
 }
 
 fn candidate_information(p: v1::CandidatePrediction) -> Result<CandidateInformation, StageError> {
@@ -421,8 +444,13 @@ fn candidate_information(p: v1::CandidatePrediction) -> Result<CandidateInformat
         .and_then(|m| {
             Matrix6::try_from(m).map_err(|e| StageError::Internal(format!("a worker's {e}")))
         })?;
-    let sigma_z_m = match &p.sigma_z_m {
-        Some(image) => Some((sigma_map(image)?, p.roi_u0_px, p.roi_v0_px)),
+    let maps = match &p.sigma_z_m {
+        Some(sigma) => Some(predicted_maps(
+            sigma,
+            p.missing_cause.as_ref(),
+            p.roi_u0_px,
+            p.roi_v0_px,
+        )?),
         None => None,
     };
     Ok(CandidateInformation {
@@ -433,7 +461,7 @@ fn candidate_information(p: v1::CandidatePrediction) -> Result<CandidateInformat
         missing_ratio: p.missing_ratio,
         missing_sigma: p.missing_sigma,
         not_in_view: p.not_in_view,
-        sigma_z_m,
+        maps,
         predict_ms: p.predict_ms,
     })
 }

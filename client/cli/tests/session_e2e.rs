@@ -1,0 +1,296 @@
+//! Active sessions end to end over real gRPC on loopback: `glint serve all` as a process,
+//! driven by Glint's Rust client (`glint_client`, the code `glint session run` and the demo
+//! run). A session converges and its pose error falls; StartSession and RunSession name the
+//! field of bad input; health turns NOT_SERVING when the server is told to stop.
+
+mod common;
+
+use std::time::Duration;
+
+use glint_client::{MockSession, run_mock_session};
+use glint_geometry::Part;
+use glint_orchestrator::session::ViewPolicy;
+use glint_proto::v1;
+use glint_proto::v1::orchestrator_service_client::OrchestratorServiceClient;
+use tonic::Code;
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .unwrap()
+}
+
+/// A small bin (debug build, 2 cores): 640×512 px, 1 sample per pixel.
+fn small_session(policy: ViewPolicy, max_views: u32, entropy_threshold_nats: f64) -> MockSession {
+    MockSession {
+        part: Part::Zigzag,
+        instances: 4,
+        policy,
+        max_views,
+        entropy_threshold_nats,
+        candidates: 12,
+        seed: 3,
+        width_px: 640,
+        height_px: 512,
+        samples_per_pixel: 1,
+    }
+}
+
+#[test]
+fn a_session_over_grpc_converges_and_its_pose_error_falls() {
+    let server = common::serve(&["all", "--listen", "127.0.0.1:0"]);
+    // Stop once the pose is known to 0.1 mm and 0.1° per axis: a robot's placing tolerance,
+    // not a number read off a run.
+    let threshold = glint_estimation::nbv::entropy_of_axis_sigmas(0.1e-3, 0.1f64.to_radians());
+    let spec = small_session(ViewPolicy::Nbv, 6, threshold);
+    let outcome = runtime()
+        .block_on(run_mock_session(
+            &server.addr,
+            &server.addr,
+            &spec,
+            None,
+            |_, _| {},
+        ))
+        .unwrap();
+    assert!(
+        outcome.session.error.is_empty(),
+        "{}",
+        outcome.session.error
+    );
+    assert_eq!(
+        outcome.session.state,
+        v1::SessionState::Converged as i32,
+        "entropies {:?}",
+        outcome
+            .steps
+            .iter()
+            .map(|s| s.entropy_nats)
+            .collect::<Vec<_>>()
+    );
+    let last = outcome.steps.last().unwrap();
+    assert!(last.entropy_nats < threshold);
+    // Only the last step is below the threshold (the session stops there).
+    for step in &outcome.steps[..outcome.steps.len() - 1] {
+        assert!(step.entropy_nats >= threshold);
+    }
+    // Every view after the first was chosen by prediction, among views not taken.
+    let mut taken = Vec::new();
+    for step in &outcome.steps {
+        assert!(
+            !taken.contains(&step.view),
+            "view {} taken twice",
+            step.view
+        );
+        taken.push(step.view);
+        assert_eq!(
+            step.candidate_entropies_nats.is_empty(),
+            step.next_view.is_none()
+        );
+    }
+    for step in &outcome.steps[1..] {
+        assert!(step.predicted_entropy_nats.is_finite());
+    }
+    // The pose error falls from the detector's (3.1 mm / 7.7° off on this bin) in translation
+    // and rotation. A pose converged to 0.1 mm / 0.1° per axis lies within a few of those σ
+    // of the truth wherever the depth is unbiased; the mock's depth bias on this part is
+    // ~0.3 mm (issue 16), so 2 mm bounds the translation with margin. Rotation is not bounded
+    // absolutely: at 640×512 and 1 sample per pixel the Zigzag's 20 mm leaves few pixels
+    // (the covariance is overconfident there, issue 12).
+    let first = &outcome.initial_deviation;
+    let final_error = outcome.deviations.last().unwrap();
+    assert!(
+        final_error.translation_mm() < 2.0,
+        "{} mm",
+        final_error.translation_mm()
+    );
+    assert!(final_error.translation_mm() < first.translation_mm());
+    assert!(final_error.rotation_deg() < first.rotation_deg());
+
+    // The same server takes the next session on a mock set up anew at another resolution.
+    let again = MockSession {
+        width_px: 320,
+        height_px: 256,
+        ..small_session(ViewPolicy::MaxDistance, 1, 0.0)
+    };
+    let outcome = runtime()
+        .block_on(run_mock_session(
+            &server.addr,
+            &server.addr,
+            &again,
+            None,
+            |_, _| {},
+        ))
+        .unwrap();
+    assert!(
+        outcome.session.error.is_empty(),
+        "{}",
+        outcome.session.error
+    );
+    assert_eq!(outcome.steps.len(), 1);
+}
+
+/// The INVALID_ARGUMENT (or other) status `request` gets, with its message.
+async fn start(
+    client: &mut OrchestratorServiceClient<tonic::transport::Channel>,
+    request: v1::StartSessionRequest,
+) -> tonic::Status {
+    client
+        .start_session(request)
+        .await
+        .expect_err("the request is refused")
+}
+
+#[test]
+fn bad_session_requests_are_refused_naming_the_field() {
+    let server = common::serve(&["all", "--listen", "127.0.0.1:0"]);
+    runtime().block_on(async {
+        let mut client =
+            OrchestratorServiceClient::new(glint_client::channel(&server.addr).await.unwrap());
+        let zigzag = v1::PartSpec {
+            part: Some(v1::part_spec::Part::Builtin("zigzag".into())),
+        };
+        let pose = |x: f64, q: [f64; 4]| v1::Pose {
+            translation_m: Some(v1::Vector3 { x, y: 0.0, z: 0.5 }),
+            rotation: Some(v1::UnitQuaternion {
+                w: q[0],
+                x: q[1],
+                y: q[2],
+                z: q[3],
+            }),
+            ..Default::default()
+        };
+        let good = v1::StartSessionRequest {
+            part: Some(zigzag),
+            initial_t_w_o: Some(pose(0.0, [1.0, 0.0, 0.0, 0.0])),
+            policy: v1::ViewPolicy::MaxDistance as i32,
+            max_views: 3,
+            ..Default::default()
+        };
+        let cases = [
+            (
+                v1::StartSessionRequest {
+                    initial_t_w_o: Some(pose(f64::NAN, [1.0, 0.0, 0.0, 0.0])),
+                    ..good.clone()
+                },
+                "initial_t_w_o.translation_m.x",
+            ),
+            (
+                v1::StartSessionRequest {
+                    initial_t_w_o: Some(pose(0.0, [0.5, 0.0, 0.0, 0.0])),
+                    ..good.clone()
+                },
+                "initial_t_w_o.rotation",
+            ),
+            (
+                v1::StartSessionRequest {
+                    candidates_t_w_c: vec![
+                        pose(0.0, [1.0, 0.0, 0.0, 0.0]),
+                        pose(f64::INFINITY, [1.0, 0.0, 0.0, 0.0]),
+                    ],
+                    ..good.clone()
+                },
+                "candidates_t_w_c[1].translation_m.x",
+            ),
+            (
+                v1::StartSessionRequest {
+                    max_views: 0,
+                    ..good.clone()
+                },
+                "max_views",
+            ),
+            (
+                v1::StartSessionRequest {
+                    part: Some(v1::PartSpec {
+                        part: Some(v1::part_spec::Part::Builtin("teapot".into())),
+                    }),
+                    ..good.clone()
+                },
+                "part.builtin",
+            ),
+            (
+                v1::StartSessionRequest {
+                    policy: 99,
+                    ..good.clone()
+                },
+                "policy",
+            ),
+            (
+                v1::StartSessionRequest {
+                    entropy_threshold_nats: f64::NAN,
+                    ..good.clone()
+                },
+                "entropy_threshold_nats",
+            ),
+            (
+                v1::StartSessionRequest {
+                    radiometric_scale: 2.0,
+                    ..good.clone()
+                },
+                "material",
+            ),
+        ];
+        for (request, field) in cases {
+            let status = start(&mut client, request).await;
+            assert_eq!(status.code(), Code::InvalidArgument, "{field}: {status:?}");
+            assert!(
+                status.message().starts_with(field),
+                "{field}: {:?}",
+                status.message()
+            );
+        }
+        // No mock scene is set up yet: the camera's candidate views cannot be had.
+        let status = start(&mut client, good.clone()).await;
+        assert_eq!(status.code(), Code::FailedPrecondition, "{status:?}");
+        // An unknown session is NOT_FOUND, naming it.
+        let status = client
+            .run_session(v1::RunSessionRequest {
+                session_id: "s999999".into(),
+            })
+            .await
+            .expect_err("no such session");
+        assert_eq!(status.code(), Code::NotFound);
+        assert!(status.message().contains("s999999"), "{status:?}");
+    });
+}
+
+#[test]
+fn serve_all_turns_not_serving_when_told_to_stop() {
+    use tonic_health::pb::health_check_response::ServingStatus;
+    use tonic_health::pb::{HealthCheckRequest, health_client::HealthClient};
+    let mut server = common::serve(&["all", "--listen", "127.0.0.1:0"]);
+    runtime().block_on(async {
+        let channel = glint_client::channel(&server.addr).await.unwrap();
+        let mut watch = HealthClient::new(channel)
+            .watch(HealthCheckRequest {
+                service: "glint.v1.OrchestratorService".into(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let first = watch.message().await.unwrap().unwrap();
+        assert_eq!(first.status(), ServingStatus::Serving);
+        let pid = server.child.id().to_string();
+        let killed = std::process::Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap();
+        assert!(killed.success());
+        let next = tokio::time::timeout(Duration::from_secs(10), watch.message())
+            .await
+            .expect("health changes within the bound")
+            .unwrap()
+            .unwrap();
+        assert_eq!(next.status(), ServingStatus::NotServing);
+    });
+    // And the process ends cleanly within its drain bound (10 s by default).
+    let started = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = server.child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(started.elapsed() < Duration::from_secs(20), "still running");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(status.success(), "{status:?}");
+}
