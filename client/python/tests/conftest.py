@@ -1,32 +1,27 @@
-"""Test fixtures: stubs generated from proto/ by grpcio-tools (never hand-written) and a Glint
-server started from the workspace's `glint` binary on a free loopback port."""
+"""Test fixtures: the `glint.v1` stubs (generated from proto/ by grpcio-tools at first use, see
+`glint_client.stubs`) and Glint servers started from the workspace's `glint` binary on free
+loopback ports."""
 
 import os
 import pathlib
 import subprocess
 import sys
+import threading
 
 import pytest
 
-REPO = pathlib.Path(__file__).resolve().parents[3]
-PROTO = REPO / "proto"
+CLIENT = pathlib.Path(__file__).resolve().parents[1]
+REPO = CLIENT.parents[1]
+sys.path.insert(0, str(CLIENT))
+
+from glint_client import stubs as glint_stubs  # noqa: E402
 
 
 @pytest.fixture(scope="session")
-def stubs(tmp_path_factory):
-    """The `glint.v1` modules, generated from proto/glint/v1/*.proto into a temporary dir."""
-    from grpc_tools import protoc
-
-    out = tmp_path_factory.mktemp("stubs")
-    files = sorted(str(p) for p in (PROTO / "glint" / "v1").glob("*.proto"))
-    code = protoc.main(
-        ["protoc", f"-I{PROTO}", f"--python_out={out}", f"--grpc_python_out={out}", *files]
-    )
-    assert code == 0, f"grpc_tools.protoc failed with {code}"
-    sys.path.insert(0, str(out))
-    from glint.v1 import calibration_pb2, calibration_pb2_grpc, common_pb2
-
-    return calibration_pb2, calibration_pb2_grpc, common_pb2
+def stubs():
+    """The calibration test's modules: (calibration_pb2, calibration_pb2_grpc, common_pb2)."""
+    s = glint_stubs.load()
+    return s.calibration_pb2, s.calibration_pb2_grpc, s.common_pb2
 
 
 def glint_binary():
@@ -36,19 +31,56 @@ def glint_binary():
     return path
 
 
+class Server:
+    """`glint serve <args> --listen 127.0.0.1:0`: its address from the first stdout line
+    ("listening on ADDR"); stdout after it is drained in the background, stderr goes to a
+    file shown when the server fails."""
+
+    def __init__(self, args, log_path):
+        self.log_path = log_path
+        self._log = open(log_path, "w")
+        self.proc = subprocess.Popen(
+            [glint_binary(), "serve", *args, "--listen", "127.0.0.1:0"],
+            stdout=subprocess.PIPE,
+            stderr=self._log,
+            text=True,
+        )
+        line = self.proc.stdout.readline()
+        if not line.startswith("listening on "):
+            self.proc.kill()
+            self.proc.wait()
+            pytest.fail(f"`glint serve {' '.join(args)}` printed {line!r} first; stderr:\n{self.log()}")
+        self.addr = line.split()[-1]
+        threading.Thread(target=self.proc.stdout.read, daemon=True).start()
+
+    def log(self):
+        self._log.flush()
+        return pathlib.Path(self.log_path).read_text()[-4000:]
+
+    def stop(self):
+        """SIGTERM; the server must stop cleanly (exit 0)."""
+        self.proc.terminate()
+        code = self.proc.wait(timeout=30)
+        self._log.close()
+        assert code == 0, f"the server did not stop cleanly on SIGTERM (exit {code}); stderr:\n{self.log()}"
+
+
 @pytest.fixture()
-def calibration_server():
+def calibration_server(tmp_path):
     """`glint serve calibration` on 127.0.0.1:0; yields its address, stops it with SIGTERM."""
-    proc = subprocess.Popen(
-        [glint_binary(), "serve", "calibration", "--listen", "127.0.0.1:0"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,
-        text=True,
-    )
-    line = proc.stdout.readline()
-    assert line.startswith("listening on "), f"unexpected first line {line!r}"
+    server = Server(["calibration"], tmp_path / "calibration.log")
     try:
-        yield line.split()[-1]
+        yield server.addr
     finally:
-        proc.terminate()
-        assert proc.wait(timeout=20) == 0, "the server did not stop cleanly on SIGTERM"
+        server.stop()
+
+
+@pytest.fixture(scope="session")
+def glint_all(tmp_path_factory):
+    """`glint serve all` (camera, estimation, a render worker and the orchestrator on one port)
+    for the whole test session; yields the `Server` (address in `.addr`)."""
+    server = Server(["all"], tmp_path_factory.mktemp("serve-all") / "serve-all.log")
+    try:
+        yield server
+    finally:
+        server.stop()
