@@ -223,29 +223,31 @@ fn loopback(args: &FanoutBenchArgs) -> anyhow::Result<()> {
             r.calls
         );
     }
-    // The model: a candidate costs `cpu_ms` of one core (in-process, all cores busy); the
-    // wire adds what one worker process costs beyond in-process on this machine, per
-    // candidate; N machines of `cores` cores each share the candidates.
+    // The model: a candidate costs `cpu_ms` of one core (in-process, all cores busy), and
+    // going over the wire to another process `wire_cpu_ms` more of one core (encoding,
+    // decoding, the second process: what one worker process costs beyond in-process here,
+    // on all cores); N machines of `cores` cores share the candidates in rounds, and every
+    // byte crosses the orchestrator's link.
     let cpu_ms = local_ms * cores / c;
     let one_worker = &rows[1.min(rows.len() - 1)];
-    let wire_ms = ((one_worker.decision_ms - local_ms) / c).max(0.0);
+    let wire_cpu_ms = ((one_worker.decision_ms - local_ms) * cores / c).max(0.0);
     let bytes = (one_worker.request_bytes + one_worker.response_bytes) as f64 / c;
+    let link_ms = c * bytes * 8.0 / 1e9 * 1e3;
     let _ = writeln!(
         table,
-        "\nPer candidate: {cpu_ms:.1} ms of one core; the wire and a second process add \
-         {wire_ms:.2} ms and {bytes:.0} B on loopback. With all candidates spread over N \
-         machines of {cores} cores, each as fast as this one, a decision takes about \
-         ⌈C / (N·{cores})⌉ · {cpu_ms:.1} ms + {wire_ms:.2} ms (1 Gb/s adds {:.3} ms per candidate \
-         at the orchestrator's link):\n\n| machines | decision ms (model) |\n|---:|---:|",
-        bytes * 8.0 / 1e9 * 1e3
+        "\nPer candidate: {cpu_ms:.1} ms of one core to predict, {wire_cpu_ms:.1} ms more over \
+         the wire to another process, {bytes:.0} B both ways. Spread over N machines of \
+         {cores} cores each as fast as this one, a decision takes about \
+         ⌈C / (N·{cores})⌉ · ({cpu_ms:.1} + {wire_cpu_ms:.1}) ms + C · {bytes:.0} B at 1 Gb/s \
+         ({link_ms:.1} ms):\n\n| machines | decision ms (model) | ÷ in-process here |\n|---:|---:|---:|"
     );
     for machines in [1u32, 2, 4, 8, 16] {
         let rounds = (c / (f64::from(machines) * cores)).ceil();
-        let link_ms = c * bytes * 8.0 / 1e9 * 1e3;
+        let model_ms = rounds * (cpu_ms + wire_cpu_ms) + link_ms;
         let _ = writeln!(
             table,
-            "| {machines} | {:.0} |",
-            rounds * cpu_ms + wire_ms + link_ms
+            "| {machines} | {model_ms:.0} | {:.2} |",
+            model_ms / local_ms
         );
     }
     println!("{table}");
