@@ -147,13 +147,20 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         let bar = glint_eval::progress::bar(u64::from(args.max_views), "views");
         let mut rows = vec![table_header()];
         let addr = server.addr.to_string();
-        let outcome = run_mock_session(&addr, &addr, &spec, calibration.as_ref(), |row, step| {
-            bar.suspend(|| println!("{row}"));
-            if step.is_some() {
-                bar.inc(1);
-                rows.push(row.to_owned());
-            }
-        })
+        let outcome = run_mock_session(
+            &addr,
+            &addr,
+            &spec,
+            calibration.as_ref(),
+            &Default::default(),
+            |row, step| {
+                bar.suspend(|| println!("{row}"));
+                if step.is_some() {
+                    bar.inc(1);
+                    rows.push(row.to_owned());
+                }
+            },
+        )
         .await;
         bar.finish_and_clear();
         let outcome = match outcome {

@@ -11,6 +11,7 @@ mod eval;
 mod mesh_cmd;
 mod mitsuba_export;
 mod preview;
+mod security_args;
 mod serve_cmd;
 mod session_cmd;
 
@@ -29,7 +30,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// The main job: builds the five evaluation parts, checks them and writes a report.
+    /// The main job: an active session on a mock bin, run through Glint's gRPC services served
+    /// in this process; writes a report (index.html).
     Demo(demo::DemoArgs),
     /// Mock SLI camera: a bin of one part captured from several views.
     Capture(capture_cmd::CaptureArgs),

@@ -31,6 +31,9 @@ pub struct ServeArgs {
         default_value_t = 10.0
     )]
     pub drain_timeout_s: f64,
+    /// Token and TLS.
+    #[command(flatten)]
+    pub security: crate::security_args::ServerSecurityArgs,
 }
 
 #[derive(clap::Subcommand, Clone, Debug)]
@@ -180,6 +183,9 @@ pub struct HealthcheckArgs {
     /// Seconds to wait for an answer.
     #[arg(long, default_value_t = 3.0)]
     pub timeout_s: f64,
+    /// TLS (and a token, though health checks need none).
+    #[command(flatten)]
+    pub security: crate::security_args::ClientSecurityArgs,
 }
 
 fn seconds(flag: &str, s: f64) -> anyhow::Result<Duration> {
@@ -200,6 +206,7 @@ fn orchestrator(
     estimation: &str,
     workers: &str,
     fan_out: &FanOutArgs,
+    security: &glint_server::security::ClientSecurity,
 ) -> anyhow::Result<Arc<Orchestrator>> {
     use glint_orchestrator::remote::{self, prediction};
     let deadline = seconds("--call-deadline-s", fan_out.call_deadline_s)?;
@@ -208,7 +215,7 @@ fn orchestrator(
         "--call-deadline-s: must be positive"
     );
     let handle = tokio::runtime::Handle::current();
-    let endpoint = |addr: &str| remote::Endpoint::new(addr, deadline);
+    let endpoint = |addr: &str| remote::Endpoint::secured(addr, deadline, security.clone());
     let source =
         prediction::WorkerSource::parse(workers).map_err(|e| anyhow::anyhow!("--workers: {e}"))?;
     let pool = prediction::RemotePrediction::new(
@@ -219,7 +226,8 @@ fn orchestrator(
             call_deadline: deadline,
             ..prediction::PoolConfig::default()
         },
-    );
+    )
+    .with_security(security.clone());
     let camera = remote::camera::RemoteCamera::new(handle.clone(), endpoint(camera))
         .map_err(|e| anyhow::anyhow!("--camera: {e}"))?;
     let estimation = remote::estimation::RemoteEstimation::new(handle, endpoint(estimation))
@@ -243,9 +251,10 @@ fn orchestrator(
 fn all_services(
     own: &str,
     all: &AllArgs,
+    security: &glint_server::security::ClientSecurity,
 ) -> anyhow::Result<(tonic::service::Routes, Vec<&'static str>, Arc<Orchestrator>)> {
     let workers = all.workers.as_deref().unwrap_or(own);
-    let orchestrator = orchestrator(own, own, workers, &all.fan_out)?;
+    let orchestrator = orchestrator(own, own, workers, &all.fan_out, security)?;
     let routes = all
         .camera
         .camera()?
@@ -278,7 +287,8 @@ impl InProcessServer {
     pub async fn start(all: &AllArgs, drain_timeout: Duration) -> anyhow::Result<Self> {
         let listener = glint_server::bind("127.0.0.1:0").await?;
         let addr = listener.local_addr()?;
-        let (routes, services, orchestrator) = all_services(&addr.to_string(), all)?;
+        let (routes, services, orchestrator) =
+            all_services(&addr.to_string(), all, &Default::default())?;
         let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(glint_server::serve(
             listener,
@@ -286,6 +296,7 @@ impl InProcessServer {
             ServeConfig {
                 services,
                 drain_timeout,
+                security: Default::default(),
             },
             async {
                 let _ = stopped.await;
@@ -311,6 +322,11 @@ impl InProcessServer {
 
 pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
     let drain_timeout = seconds("--drain-timeout-s", args.drain_timeout_s)?;
+    let security = args.security.server()?;
+    let outbound = match &args.stage {
+        Stage::Orchestrator(_) | Stage::All(_) => args.security.outbound()?,
+        _ => Default::default(),
+    };
     runtime()?.block_on(async {
         let listener = glint_server::bind(&args.listen).await?;
         let (routes, services) = match &args.stage {
@@ -344,13 +360,15 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
                         &o.estimation,
                         &o.workers,
                         &o.fan_out,
+                        &outbound,
                     )?)
                     .into_service(),
                 ),
                 vec![glint_orchestrator::server::SERVICE_NAME],
             ),
             Stage::All(all) => {
-                let (routes, services, _) = all_services(&listener.local_addr()?.to_string(), all)?;
+                let (routes, services, _) =
+                    all_services(&listener.local_addr()?.to_string(), all, &outbound)?;
                 (routes, services)
             }
         };
@@ -366,6 +384,7 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
             ServeConfig {
                 services,
                 drain_timeout,
+                security,
             },
             glint_server::shutdown_signal(),
         )
@@ -376,12 +395,14 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
 
 pub fn healthcheck(args: &HealthcheckArgs) -> anyhow::Result<()> {
     let timeout = seconds("--timeout-s", args.timeout_s)?;
-    let target = if args.target.contains("://") {
-        args.target.clone()
-    } else {
-        format!("http://{}", args.target)
-    };
-    let status = runtime()?.block_on(glint_server::healthcheck(&target, &args.service, timeout))?;
+    let security = args.security.client()?;
+    let target = security.uri(&args.target);
+    let status = runtime()?.block_on(glint_server::healthcheck(
+        &target,
+        &args.service,
+        timeout,
+        &security,
+    ))?;
     let what = if args.service.is_empty() {
         "the server"
     } else {

@@ -27,6 +27,9 @@ pub struct SessionArgs {
         default_value = "127.0.0.1:50051"
     )]
     pub orchestrator: String,
+    /// Token and TLS.
+    #[command(flatten)]
+    pub security: crate::security_args::ClientSecurityArgs,
 }
 
 #[derive(clap::Subcommand)]
@@ -108,6 +111,7 @@ fn session_line(s: &v1::Session) -> String {
 }
 
 pub fn run(args: &SessionArgs) -> anyhow::Result<()> {
+    let security = args.security.client()?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -127,6 +131,7 @@ pub fn run(args: &SessionArgs) -> anyhow::Result<()> {
                     run.camera.as_deref().unwrap_or(&args.orchestrator),
                     &run.spec(),
                     calibration.as_ref(),
+                    &security,
                     |row, _| println!("{row}"),
                 )
                 .await?;
@@ -146,7 +151,7 @@ pub fn run(args: &SessionArgs) -> anyhow::Result<()> {
                 }
             }
             SessionCommand::List => {
-                let mut client = OrchestratorServiceClient::new(channel(&args.orchestrator).await?);
+                let mut client = OrchestratorServiceClient::new(channel(&args.orchestrator, &security).await?);
                 let list = client
                     .list_sessions(v1::ListSessionsRequest {})
                     .await
@@ -157,7 +162,7 @@ pub fn run(args: &SessionArgs) -> anyhow::Result<()> {
                 }
             }
             SessionCommand::Show { id } => {
-                let mut client = OrchestratorServiceClient::new(channel(&args.orchestrator).await?);
+                let mut client = OrchestratorServiceClient::new(channel(&args.orchestrator, &security).await?);
                 let s = client
                     .get_session(v1::GetSessionRequest {
                         session_id: id.clone(),
@@ -175,7 +180,7 @@ pub fn run(args: &SessionArgs) -> anyhow::Result<()> {
                 }
             }
             SessionCommand::Cancel { id } => {
-                let mut client = OrchestratorServiceClient::new(channel(&args.orchestrator).await?);
+                let mut client = OrchestratorServiceClient::new(channel(&args.orchestrator, &security).await?);
                 let s = client
                     .cancel_session(v1::CancelSessionRequest {
                         session_id: id.clone(),

@@ -50,6 +50,7 @@ fn a_session_over_grpc_converges_and_its_pose_error_falls() {
             &server.addr,
             &spec,
             None,
+            &Default::default(),
             |_, _| {},
         ))
         .unwrap();
@@ -119,6 +120,7 @@ fn a_session_over_grpc_converges_and_its_pose_error_falls() {
             &server.addr,
             &again,
             None,
+            &Default::default(),
             |_, _| {},
         ))
         .unwrap();
@@ -132,7 +134,7 @@ fn a_session_over_grpc_converges_and_its_pose_error_falls() {
 
 /// The INVALID_ARGUMENT (or other) status `request` gets, with its message.
 async fn start(
-    client: &mut OrchestratorServiceClient<tonic::transport::Channel>,
+    client: &mut OrchestratorServiceClient<glint_client::AuthChannel>,
     request: v1::StartSessionRequest,
 ) -> tonic::Status {
     client
@@ -145,8 +147,11 @@ async fn start(
 fn bad_session_requests_are_refused_naming_the_field() {
     let server = common::serve(&["all", "--listen", "127.0.0.1:0"]);
     runtime().block_on(async {
-        let mut client =
-            OrchestratorServiceClient::new(glint_client::channel(&server.addr).await.unwrap());
+        let mut client = OrchestratorServiceClient::new(
+            glint_client::channel(&server.addr, &Default::default())
+                .await
+                .unwrap(),
+        );
         let zigzag = v1::PartSpec {
             part: Some(v1::part_spec::Part::Builtin("zigzag".into())),
         };
@@ -260,7 +265,9 @@ fn serve_all_turns_not_serving_when_told_to_stop() {
     use tonic_health::pb::{HealthCheckRequest, health_client::HealthClient};
     let mut server = common::serve(&["all", "--listen", "127.0.0.1:0"]);
     runtime().block_on(async {
-        let channel = glint_client::channel(&server.addr).await.unwrap();
+        let channel = glint_client::channel(&server.addr, &Default::default())
+            .await
+            .unwrap();
         let mut watch = HealthClient::new(channel)
             .watch(HealthCheckRequest {
                 service: "glint.v1.OrchestratorService".into(),

@@ -10,6 +10,10 @@ your pose (object -> world, metres).
 
     python3 client/python/examples/active_session.py --target 127.0.0.1:50051 --part zigzag --max-views 3
 
+A secured deployment: `--token-file FILE` (default $GLINT_TOKEN_FILE) sends its token on every
+call, `--tls-ca FILE` connects over TLS trusting that CA, `--tls-cert FILE --tls-key FILE`
+present a client certificate (mutual TLS).
+
 Exit codes: 0 the session ended (threshold or budget), 1 a failed session or call, 2 bad
 input (flags, files, or a request the servers reject as INVALID_ARGUMENT).
 """
@@ -128,7 +132,17 @@ def arguments(argv: Optional[list[str]]) -> argparse.Namespace:
     p.add_argument("--material", type=pathlib.Path, help="the part's material.json (glint calibrate bsdf), with --response")
     p.add_argument("--response", type=pathlib.Path, help="the camera's response.json (glint calibrate response), with --material")
     p.add_argument("--json", type=pathlib.Path, help="write a machine-readable record of the session here")
+    p.add_argument("--token-file", type=pathlib.Path, default=os.environ.get("GLINT_TOKEN_FILE") or None,
+                   help="send the token in this file as `authorization: Bearer <token>` on every call "
+                        "(default $GLINT_TOKEN_FILE)")
+    p.add_argument("--tls-ca", type=pathlib.Path, help="connect over TLS, trusting this CA (PEM) for the servers' certificates")
+    p.add_argument("--tls-cert", type=pathlib.Path, help="client certificate (PEM) for servers that require one; with --tls-key and --tls-ca")
+    p.add_argument("--tls-key", type=pathlib.Path, help="the client certificate's private key (PEM)")
     args = p.parse_args(argv)
+    if (args.tls_cert is None) != (args.tls_key is None):
+        raise UsageError("--tls-cert and --tls-key go together")
+    if args.tls_cert is not None and args.tls_ca is None:
+        raise UsageError("--tls-cert needs --tls-ca (the CA of the servers' certificates): a client certificate needs TLS")
     if args.mesh is None:
         args.part = args.part or "zigzag"
         if args.part not in BUILTIN_PARTS:
@@ -190,10 +204,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         calibration = PartCalibration.from_files(args.material, args.response) if args.material else None
         part = MeshPart.from_file(args.mesh, args.unit) if args.mesh else args.part
-        client = GlintClient(args.target, args.camera)
+        client = GlintClient(args.target, args.camera, token_file=args.token_file,
+                             tls_ca=args.tls_ca, tls_cert=args.tls_cert, tls_key=args.tls_key)
     except OSError as e:
         raise UsageError(f"{e.filename}: {e.strerror}") from None
-    except ValueError as e:  # CalibrationFileError, a mesh's suffix, a target's scheme
+    except ValueError as e:  # CalibrationFileError, SecurityConfigError, a mesh's suffix, a target's scheme
         raise UsageError(str(e)) from None
     truth: Optional[Truth] = None
     detector: Optional[dict[str, Any]] = None
@@ -328,8 +343,10 @@ def record(
 
 def main(argv: Optional[list[str]] = None) -> int:
     name = pathlib.Path(sys.argv[0]).name
+    args: Optional[argparse.Namespace] = None
     try:
-        return run(arguments(argv))
+        args = arguments(argv)
+        return run(args)
     except UsageError as e:
         print(f"{name}: error: {e}", file=sys.stderr)
         return EXIT_USAGE
@@ -338,7 +355,11 @@ def main(argv: Optional[list[str]] = None) -> int:
         return EXIT_FAILED
     except GlintError as e:
         hint = ""
-        if e.rpc == "StartSession" and e.code_name == "FAILED_PRECONDITION" and "calibration" in e.message:
+        if e.code_name == "UNAUTHENTICATED":
+            token_file = args.token_file if args else None
+            hint = (f" (the token in {token_file} was refused)" if token_file
+                    else " (no token was sent: --token-file FILE or GLINT_TOKEN_FILE)")
+        elif e.rpc == "StartSession" and e.code_name == "FAILED_PRECONDITION" and "calibration" in e.message:
             hint = " (pass --material FILE --response FILE, or use --policy random or max-distance)"
         print(f"{name}: error: {e}{hint}", file=sys.stderr)
         return EXIT_USAGE if e.code_name == "INVALID_ARGUMENT" else EXIT_FAILED

@@ -2,7 +2,13 @@
 the camera (and, on the mock, its scene set-up and ground truth) at `camera`.
 
 Every failed call raises `GlintError` with the gRPC code and the server's message (bad input
-is INVALID_ARGUMENT with a message starting with the field's path)."""
+is INVALID_ARGUMENT with a message starting with the field's path; a call without the
+deployment's token, or with a wrong one, is UNAUTHENTICATED).
+
+A secured deployment (`glint serve … --token-file FILE --tls-cert FILE --tls-key FILE
+[--tls-client-ca FILE]`) is reached with `token=`/`token_file=` (sent as `authorization:
+Bearer <token>` on every call) and `tls_ca=` (TLS on, trusting that CA), plus `tls_cert=` and
+`tls_key=` when the servers require client certificates."""
 
 from __future__ import annotations
 
@@ -17,25 +23,37 @@ from .camera import GroundTruth, MockBin
 from .errors import GlintError, calling
 from .parts import PartLike, part_spec
 from .pose import Pose
+from .security import BearerToken, PathLike, SecurityConfigError, channel_credentials, resolve_token
 from .session import Session, Step, ViewPolicy
 
 #: Deadline of a unary call, seconds (a mock's SetUpScene on a debug build takes a while).
 DEFAULT_TIMEOUT_S = 120.0
 
 
-def grpc_target(addr: str) -> str:
+def grpc_target(addr: str, tls: bool = False) -> str:
     """`HOST:PORT` for grpcio: a leading `http://` is dropped (as Glint's Rust client accepts
-    it); TLS is not supported by this client."""
-    if addr.startswith("http://"):
-        return addr[len("http://") :].rstrip("/")
+    it), and so is `https://` when TLS is on (`tls_ca`); TLS is never inferred from the
+    address."""
+    for scheme in ("http://", "https://"):
+        if addr.startswith(scheme):
+            if scheme == "https://" and not tls:
+                raise SecurityConfigError(f"{addr}: https:// needs tls_ca (the CA of the server's certificate); or give HOST:PORT")
+            return addr[len(scheme) :].rstrip("/")
     if "://" in addr:
-        raise ValueError(f"{addr}: give HOST:PORT (or http://HOST:PORT); this client speaks plaintext gRPC")
+        raise ValueError(f"{addr}: give HOST:PORT (or http://HOST:PORT, https://HOST:PORT with tls_ca)")
     return addr
 
 
 class GlintClient:
     """A connection to a deployment: the orchestrator at `target` (HOST:PORT) and the camera
     at `camera` (default: `target`, as `glint serve all` serves every service on one port).
+
+    Security (both connections alike): `token` (the text) or `token_file` (a file holding it,
+    surrounding whitespace trimmed) is sent as `authorization: Bearer <token>` on every call;
+    `tls_ca` (PEM file of the CA that signed the servers' certificates) turns TLS on, and
+    `tls_cert` with `tls_key` (PEM) present a client certificate to servers that require one
+    (mutual TLS). Unusable files or settings raise `SecurityConfigError` (a `ValueError`)
+    naming the file, never the token.
 
     Use as a context manager, or call `close()`. `timeout_s` bounds every unary call;
     `run_session` waits as long as the session runs unless given its own `timeout_s`.
@@ -45,26 +63,44 @@ class GlintClient:
         self,
         target: str,
         camera: Optional[str] = None,
+        token: Optional[str] = None,
+        token_file: Optional[PathLike] = None,
+        tls_ca: Optional[PathLike] = None,
+        tls_cert: Optional[PathLike] = None,
+        tls_key: Optional[PathLike] = None,
         *,
         timeout_s: float = DEFAULT_TIMEOUT_S,
         proto_dir: Union[str, os.PathLike[str], None] = None,
     ) -> None:
+        secret = resolve_token(token, token_file)
+        credentials = channel_credentials(tls_ca, tls_cert, tls_key)
         self.pb = stubs_module.load(proto_dir)
-        self.target = grpc_target(target)
-        self.camera_target = grpc_target(camera) if camera else self.target
+        self.target = grpc_target(target, tls=credentials is not None)
+        self.camera_target = grpc_target(camera, tls=credentials is not None) if camera else self.target
         self.timeout_s = timeout_s
-        self._channel = grpc.insecure_channel(self.target)
-        self._camera_channel = (
-            self._channel if self.camera_target == self.target else grpc.insecure_channel(self.camera_target)
-        )
+        #: Whether calls go over TLS / carry a token (the token itself is not kept here).
+        self.tls = credentials is not None
+        self.authenticated = secret is not None
+        interceptors = [BearerToken(secret)] if secret is not None else []
+
+        def connect(addr: str) -> grpc.Channel:
+            if credentials is None:
+                return grpc.insecure_channel(addr)
+            return grpc.secure_channel(addr, credentials)
+
+        self._raw_channels = [connect(self.target)]
+        if self.camera_target != self.target:
+            self._raw_channels.append(connect(self.camera_target))
+        channels = [grpc.intercept_channel(c, *interceptors) for c in self._raw_channels]
+        self._channel = channels[0]
+        self._camera_channel = channels[-1]
         self._orchestrator = self.pb.orchestrator_pb2_grpc.OrchestratorServiceStub(self._channel)
         self._camera = self.pb.camera_pb2_grpc.CameraServiceStub(self._camera_channel)
         self._mock = self.pb.camera_pb2_grpc.MockCameraServiceStub(self._camera_channel)
 
     def close(self) -> None:
-        self._channel.close()
-        if self._camera_channel is not self._channel:
-            self._camera_channel.close()
+        for channel in self._raw_channels:
+            channel.close()
 
     def __enter__(self) -> GlintClient:
         return self

@@ -31,6 +31,16 @@ def glint_binary():
     return path
 
 
+#: The servers' security settings from the environment (`glint serve` reads them as fallbacks
+#: of its flags): the test servers take theirs from flags only.
+SECURITY_ENV = ("GLINT_TOKEN_FILE", "GLINT_TLS_CERT", "GLINT_TLS_KEY", "GLINT_TLS_CLIENT_CA", "GLINT_TLS_CA")
+
+
+def server_env():
+    """The environment less `SECURITY_ENV`, for servers and the example alike."""
+    return {k: v for k, v in os.environ.items() if k not in SECURITY_ENV}
+
+
 class Server:
     """`glint serve <args> --listen 127.0.0.1:0`: its address from the first stdout line
     ("listening on ADDR"); stdout after it is drained in the background, stderr goes to a
@@ -44,6 +54,7 @@ class Server:
             stdout=subprocess.PIPE,
             stderr=self._log,
             text=True,
+            env=server_env(),
         )
         line = self.proc.stdout.readline()
         if not line.startswith("listening on "):

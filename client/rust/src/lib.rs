@@ -22,27 +22,20 @@ use glint_proto::v1;
 use glint_proto::v1::camera_service_client::CameraServiceClient;
 use glint_proto::v1::mock_camera_service_client::MockCameraServiceClient;
 use glint_proto::v1::orchestrator_service_client::OrchestratorServiceClient;
+pub use glint_server::security::{AuthChannel, ClientSecurity};
 use nalgebra::Isometry3;
-use tonic::transport::Channel;
 
-/// `HOST:PORT` gets `http://`; a URI stays as it is.
-pub fn uri(addr: &str) -> String {
-    if addr.contains("://") {
-        addr.to_owned()
-    } else {
-        format!("http://{addr}")
-    }
-}
-
-/// A channel to `addr` (HOST:PORT or a URI), connected within 5 s.
-pub async fn channel(addr: &str) -> anyhow::Result<Channel> {
-    let target = uri(addr);
-    tonic::transport::Endpoint::from_shared(target.clone())
-        .with_context(|| format!("{addr}: not an address; give HOST:PORT"))?
+/// A channel to `addr` (HOST:PORT or a URI), connected within 5 s, over TLS and with a token
+/// as `security` says.
+pub async fn channel(addr: &str, security: &ClientSecurity) -> anyhow::Result<AuthChannel> {
+    let target = security.uri(addr);
+    let channel = security
+        .endpoint(addr)?
         .connect_timeout(Duration::from_secs(5))
         .connect()
         .await
-        .with_context(|| format!("connecting to {target}"))
+        .with_context(|| format!("connecting to {target}"))?;
+    Ok(security.authorize(channel)?)
 }
 
 /// A status as an error a person can read: its code and message.
@@ -160,13 +153,14 @@ pub async fn run_mock_session(
     camera: &str,
     spec: &MockSession,
     calibration: Option<&PartCalibration>,
+    security: &ClientSecurity,
     mut on_row: impl FnMut(&str, Option<&v1::SessionStep>),
 ) -> anyhow::Result<RunOutcome> {
     let part = v1::PartSpec {
         part: Some(v1::part_spec::Part::Builtin(spec.part.name().into())),
     };
-    let mut mock = MockCameraServiceClient::new(channel(camera).await?);
-    let mut client = OrchestratorServiceClient::new(channel(orchestrator).await?);
+    let mut mock = MockCameraServiceClient::new(channel(camera, security).await?);
+    let mut client = OrchestratorServiceClient::new(channel(orchestrator, security).await?);
     mock.set_up_scene(v1::SetUpSceneRequest {
         part: Some(part.clone()),
         instances: spec.instances,
@@ -180,7 +174,7 @@ pub async fn run_mock_session(
     .map_err(status)
     .context("setting up the mock bin")?;
     // The session's candidates are the camera's own; the detector looked from the first.
-    let candidates = CameraServiceClient::new(channel(camera).await?)
+    let candidates = CameraServiceClient::new(channel(camera, security).await?)
         .list_candidate_views(v1::ListCandidateViewsRequest {
             count: spec.candidates,
             ..Default::default()

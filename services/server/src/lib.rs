@@ -15,6 +15,7 @@
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
 
 pub mod process;
+pub mod security;
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -43,6 +44,9 @@ pub enum ServerError {
     Transport(#[from] tonic::transport::Error),
     #[error("{target}: {problem}")]
     Unhealthy { target: String, problem: String },
+    /// A token or TLS file is unusable, or the TLS settings are refused.
+    #[error("{0}")]
+    Security(String),
 }
 
 /// How a server runs.
@@ -53,6 +57,8 @@ pub struct ServeConfig {
     pub services: Vec<&'static str>,
     /// After the shutdown signal, connections get this long to finish their calls.
     pub drain_timeout: Duration,
+    /// Token and TLS (default: neither).
+    pub security: security::ServerSecurity,
 }
 
 /// Binds `addr` (e.g. `127.0.0.1:50051`, port 0 for any free port).
@@ -109,7 +115,16 @@ pub async fn serve(
         config.services.join(", "),
         local.map_or_else(|| "?".into(), |a| a.to_string())
     );
-    let server = tonic::transport::Server::builder()
+    let mut builder = tonic::transport::Server::builder();
+    if let Some(tls) = &config.security.tls {
+        builder = builder
+            .tls_config(tls.config())
+            .map_err(|e| ServerError::Security(format!("the TLS settings: {e}")))?;
+    }
+    let server = builder
+        .layer(security::BearerAuthLayer::new(
+            config.security.token.clone(),
+        ))
         .add_routes(routes)
         .serve_with_incoming_shutdown(TcpListenerStream::new(listener), signal);
     tokio::pin!(server);
@@ -147,20 +162,19 @@ pub async fn shutdown_signal() {
     }
 }
 
-/// Asks `target` (`http://host:port`) whether `service` (empty: the whole server) is SERVING,
+/// Asks `target` (HOST:PORT or a URI; TLS and token as `security` says) whether `service` (empty: the whole server) is SERVING,
 /// within `timeout`.
 pub async fn healthcheck(
     target: &str,
     service: &str,
     timeout: Duration,
+    security: &security::ClientSecurity,
 ) -> Result<HealthStatus, ServerError> {
     let unhealthy = |problem: String| ServerError::Unhealthy {
         target: target.into(),
         problem,
     };
-    let endpoint = tonic::transport::Endpoint::from_shared(target.to_owned())
-        .map_err(|e| unhealthy(format!("not a URI ({e}); give e.g. http://127.0.0.1:50051")))?
-        .connect_timeout(timeout);
+    let endpoint = security.endpoint(target)?.connect_timeout(timeout);
     let channel = tokio::time::timeout(timeout, endpoint.connect())
         .await
         .map_err(|_| unhealthy(format!("no connection within {timeout:?}")))?
@@ -169,7 +183,7 @@ pub async fn healthcheck(
         service: service.into(),
     });
     request.set_timeout(timeout);
-    let response = HealthClient::new(channel)
+    let response = HealthClient::new(security.authorize(channel)?)
         .check(request)
         .await
         .map_err(|s| unhealthy(format!("{}: {}", s.code(), s.message())))?;

@@ -64,6 +64,9 @@ pub struct FanoutBenchArgs {
     /// Also write the table as CSV here.
     #[arg(long)]
     pub csv: Option<PathBuf>,
+    /// Token and TLS of the deployment's services.
+    #[command(flatten)]
+    pub security: crate::security_args::ClientSecurityArgs,
 }
 
 pub fn run(args: &FanoutBenchArgs) -> anyhow::Result<()> {
@@ -264,6 +267,7 @@ fn loopback(args: &FanoutBenchArgs) -> anyhow::Result<()> {
 
 fn deployment(args: &FanoutBenchArgs, orchestrator: &str) -> anyhow::Result<()> {
     let camera = args.camera.as_deref().unwrap_or(orchestrator);
+    let security = args.security.client()?;
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     let bar = glint_eval::progress::bar(u64::from(args.sessions), "sessions");
     let started = Instant::now();
@@ -288,6 +292,7 @@ fn deployment(args: &FanoutBenchArgs, orchestrator: &str) -> anyhow::Result<()> 
             camera,
             &spec,
             None,
+            &security,
             |_, _| {},
         ))?;
         anyhow::ensure!(

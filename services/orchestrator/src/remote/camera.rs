@@ -10,16 +10,15 @@ use glint_proto::v1;
 use glint_proto::v1::camera_service_client::CameraServiceClient;
 use nalgebra::Isometry3;
 use tokio::runtime::Handle;
-use tonic::transport::Channel;
 
-use super::{Endpoint, request, stage_error};
+use super::{AuthChannel, Endpoint, request, stage_error};
 use crate::stages::{CameraInfo, CameraStage, CapturedView, StageError};
 
 /// A camera server (the mock or a real camera's) as the session's camera.
 pub struct RemoteCamera {
     handle: Handle,
     endpoint: Endpoint,
-    client: CameraServiceClient<Channel>,
+    client: CameraServiceClient<AuthChannel>,
 }
 
 /// A reply the camera should not have sent (a server bug, not the caller's input).

@@ -19,9 +19,8 @@ use glint_proto::v1::estimation_service_client::EstimationServiceClient;
 use nalgebra::{Isometry3, Matrix6};
 use tokio::runtime::Handle;
 use tonic::Code;
-use tonic::transport::Channel;
 
-use super::{Endpoint, request, stage_error};
+use super::{AuthChannel, Endpoint, request, stage_error};
 use crate::local::plan_error;
 use crate::stages::{
     CapturedView, EstimationStage, RefineSettings, Refinement, SessionObject, StageError, ViewPlan,
@@ -32,7 +31,7 @@ pub struct RemoteEstimation {
     /// The runtime the calls run on (never block on it from one of its own tasks).
     pub handle: Handle,
     pub endpoint: Endpoint,
-    client: EstimationServiceClient<Channel>,
+    client: EstimationServiceClient<AuthChannel>,
     /// The service's key of each session object's mesh, once registered (the service keys a
     /// mesh by its content hash, which is the session's hash unless a caller computed that
     /// differently).

@@ -14,36 +14,46 @@ use tokio::runtime::Handle;
 use tonic::Code;
 
 use crate::stages::StageError;
+pub use glint_server::security::{AuthChannel, ClientSecurity};
 
 pub mod estimation;
 pub mod prediction;
 
-/// A stage's server address and how long its calls may take.
+/// A stage's server address, how long its calls may take, and how they are secured.
 #[derive(Clone, Debug)]
 pub struct Endpoint {
-    /// `http://host:port` (a bare `host:port` gets `http://`).
+    /// `http://host:port` (a bare `host:port` gets `http://`, or `https://` with TLS).
     pub uri: String,
     /// Deadline of every call, sent as `grpc-timeout` so the server stops working on it too.
     pub deadline: Duration,
+    /// The token sent and the TLS settings (default: neither).
+    pub security: ClientSecurity,
 }
 
 impl Endpoint {
     pub fn new(uri: &str, deadline: Duration) -> Self {
-        let uri = if uri.contains("://") {
-            uri.to_owned()
-        } else {
-            format!("http://{uri}")
-        };
-        Self { uri, deadline }
+        Self::secured(uri, deadline, ClientSecurity::default())
+    }
+
+    pub fn secured(uri: &str, deadline: Duration, security: ClientSecurity) -> Self {
+        Self {
+            uri: security.uri(uri),
+            deadline,
+            security,
+        }
     }
 
     /// A lazily connecting channel: the first call connects, a dropped connection reconnects.
-    pub fn channel(&self) -> Result<tonic::transport::Channel, StageError> {
-        Ok(tonic::transport::Endpoint::from_shared(self.uri.clone())
-            .map_err(|e| StageError::invalid("endpoint", format!("{}: {e}", self.uri)))?
+    pub fn channel(&self) -> Result<AuthChannel, StageError> {
+        let invalid = |e: glint_server::ServerError| StageError::invalid("endpoint", e.to_string());
+        let channel = self
+            .security
+            .endpoint(&self.uri)
+            .map_err(invalid)?
             .connect_timeout(self.deadline.min(Duration::from_secs(5)))
             .tcp_nodelay(true)
-            .connect_lazy())
+            .connect_lazy();
+        self.security.authorize(channel).map_err(invalid)
     }
 }
 

@@ -28,9 +28,8 @@ use glint_uncertainty::server::{ObjectDescription, object_key, object_to_message
 use nalgebra::Matrix6;
 use tokio::runtime::Handle;
 use tonic::Code;
-use tonic::transport::Channel;
 
-use super::{Endpoint, request, stage_error};
+use super::{AuthChannel, ClientSecurity, Endpoint, request, stage_error};
 use crate::stages::{
     CandidateInformation, PredictedMaps, PredictionObject, PredictionRequest, PredictionSigma,
     PredictionStage, StageError,
@@ -121,7 +120,7 @@ pub struct PoolStats {
 
 struct Worker {
     uri: String,
-    client: UncertaintyServiceClient<Channel>,
+    client: UncertaintyServiceClient<AuthChannel>,
     /// Objects this worker is known to hold.
     registered: HashSet<String>,
     /// Not sent anything before this instant.
@@ -133,6 +132,8 @@ pub struct RemotePrediction {
     handle: Handle,
     source: WorkerSource,
     pub config: PoolConfig,
+    /// The token and TLS settings of the calls to workers.
+    security: ClientSecurity,
     workers: Mutex<Vec<Worker>>,
     stats: Mutex<PoolStats>,
 }
@@ -171,9 +172,16 @@ impl RemotePrediction {
             handle,
             source,
             config,
+            security: ClientSecurity::default(),
             workers: Mutex::new(Vec::new()),
             stats: Mutex::new(PoolStats::default()),
         }
+    }
+
+    /// Calls the workers with this token and TLS settings.
+    pub fn with_security(mut self, security: ClientSecurity) -> Self {
+        self.security = security;
+        self
     }
 
     /// What the pool has done since it was made.
@@ -197,18 +205,19 @@ impl RemotePrediction {
         }
     }
 
+    fn endpoint(&self, address: &str) -> Endpoint {
+        Endpoint::secured(address, self.config.call_deadline, self.security.clone())
+    }
+
     /// Brings the worker list in line with `addresses` (new ones get a channel; vanished ones
     /// are dropped) and returns the indices of those not resting.
     fn refresh(&self, addresses: &[String]) -> Result<Vec<usize>, StageError> {
         let mut workers = self.workers.lock().map_err(poisoned)?;
-        let uris: Vec<String> = addresses
-            .iter()
-            .map(|a| Endpoint::new(a, self.config.call_deadline).uri)
-            .collect();
+        let uris: Vec<String> = addresses.iter().map(|a| self.endpoint(a).uri).collect();
         workers.retain(|w| uris.contains(&w.uri));
         for uri in &uris {
             if !workers.iter().any(|w| &w.uri == uri) {
-                let channel = Endpoint::new(uri, self.config.call_deadline).channel()?;
+                let channel = self.endpoint(uri).channel()?;
                 workers.push(Worker {
                     uri: uri.clone(),
                     client: UncertaintyServiceClient::new(channel),
@@ -236,7 +245,10 @@ impl RemotePrediction {
             .min()
     }
 
-    fn worker(&self, i: usize) -> Result<(String, UncertaintyServiceClient<Channel>), StageError> {
+    fn worker(
+        &self,
+        i: usize,
+    ) -> Result<(String, UncertaintyServiceClient<AuthChannel>), StageError> {
         let workers = self.workers.lock().map_err(poisoned)?;
         let w = workers
             .get(i)
