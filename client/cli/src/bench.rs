@@ -12,6 +12,7 @@ use nalgebra::Point3;
 use rayon::prelude::*;
 
 mod fanout;
+mod load;
 mod nbv;
 mod refine;
 
@@ -67,6 +68,9 @@ pub enum BenchCommand {
     /// in-process, with the wire's cost per candidate and a model of N machines; or whole
     /// sessions against a deployment's orchestrator (`--orchestrator`).
     Fanout(fanout::FanoutBenchArgs),
+    /// Many concurrent sessions against one orchestrator: completed, refused (load shed),
+    /// step latency p50/p99, throughput, the server's peak RSS.
+    Load(load::LoadBenchArgs),
 }
 
 pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
@@ -74,6 +78,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Refine(args) => refine::run(&args),
         BenchCommand::Nbv(args) => nbv::run(&args),
         BenchCommand::Fanout(args) => fanout::run(&args),
+        BenchCommand::Load(args) => load::run(&args),
         BenchCommand::Sdf {
             voxel_mm,
             padding_mm,

@@ -83,6 +83,11 @@ pub struct FanOutArgs {
     /// Deadline of every call to a stage, seconds (sent as grpc-timeout).
     #[arg(long, env = "GLINT_CALL_DEADLINE_S", default_value_t = 120.0)]
     pub call_deadline_s: f64,
+    /// Sessions run at once at most; RunSession beyond it answers RESOURCE_EXHAUSTED with a
+    /// retry hint (grpc-retry-pushback-ms) instead of queueing.
+    #[arg(long, env = "GLINT_MAX_RUNNING_SESSIONS", default_value_t = glint_orchestrator::service::DEFAULT_MAX_RUNNING as u32,
+          value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub max_running_sessions: u32,
     /// What the orchestrator knows of the cell: `standard-bin` (Glint's bin: rendered with the
     /// part, its floor's points dropped) or `none` (the part alone, as the paper renders it).
     #[arg(long, env = "GLINT_CELL", default_value = "standard-bin",
@@ -236,13 +241,16 @@ fn orchestrator(
         "none" => glint_orchestrator::session::Cell::unknown(),
         _ => glint_orchestrator::session::Cell::standard_bin(),
     };
-    Ok(Arc::new(Orchestrator::new(
-        Arc::new(camera),
-        Arc::new(estimation),
-        Arc::new(pool),
-        cell,
-        Arc::new(glint_orchestrator::service::MemoryStore::default()),
-    )))
+    Ok(Arc::new(
+        Orchestrator::new(
+            Arc::new(camera),
+            Arc::new(estimation),
+            Arc::new(pool),
+            cell,
+            Arc::new(glint_orchestrator::service::MemoryStore::default()),
+        )
+        .with_max_running(fan_out.max_running_sessions as usize),
+    ))
 }
 
 /// Every service on one port: the routes, their names, and the orchestrator, which reaches

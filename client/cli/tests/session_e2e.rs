@@ -301,3 +301,40 @@ fn serve_all_turns_not_serving_when_told_to_stop() {
     };
     assert!(status.success(), "{status:?}");
 }
+
+#[test]
+fn sessions_beyond_the_orchestrators_limit_wait_their_turn_and_all_complete() {
+    // 6 clients at once against a `glint serve all` that runs 2 sessions at a time: the
+    // others are refused with RESOURCE_EXHAUSTED and a retry hint, wait, and complete.
+    let out = common::glint(&[
+        "bench",
+        "load",
+        "--sessions",
+        "6",
+        "--concurrency",
+        "6",
+        "--max-running",
+        "2",
+        "--policy",
+        "max-distance",
+        "--timeout-s",
+        "300",
+    ]);
+    let said = common::printed(&out);
+    assert!(out.status.success(), "{said}");
+    // The table's row: | sessions | clients | max running | completed | failed | refused | …
+    let row: Vec<&str> = said
+        .lines()
+        .find(|l| l.starts_with("| 6 | 6 | 2 |"))
+        .unwrap_or_else(|| panic!("no result row in {said}"))
+        .split('|')
+        .map(str::trim)
+        .collect();
+    assert_eq!(row[4], "6", "completed: {said}");
+    assert_eq!(row[5], "0", "failed: {said}");
+    let refused: u32 = row[6].parse().unwrap();
+    assert!(
+        refused > 0,
+        "6 sessions on 2 places must see refusals: {said}"
+    );
+}

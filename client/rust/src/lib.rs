@@ -144,23 +144,38 @@ pub fn state_name(state: i32) -> &'static str {
     v1::SessionState::try_from(state).map_or("?", |s| s.as_str_name())
 }
 
-/// Sets up the mock bin on `camera`, asks the stand-in detector, runs a session on
-/// `orchestrator` with `calibration` for its render workers (`None`: the orchestrator's
-/// shipped one); `on_row` gets each printed line, with the step it reports if it is a step's
-/// row.
-pub async fn run_mock_session(
-    orchestrator: &str,
+/// A session ready to start on a mock bin: the request (the stand-in detector's pose, the
+/// camera's candidates) and what scores its steps against the mock's truth.
+#[derive(Clone)]
+pub struct PreparedSession {
+    pub request: v1::StartSessionRequest,
+    /// The target instance's true pose and the part's symmetry (evaluation only).
+    pub gt_t_w_o: Isometry3<f64>,
+    pub symmetry: glint_geometry::Symmetry,
+    pub initial_deviation: PoseDeviation,
+    /// What the detector did, in a sentence.
+    pub detector_line: String,
+}
+
+impl PreparedSession {
+    pub fn deviation(&self, t_w_o: &Isometry3<f64>) -> PoseDeviation {
+        pose_deviation(t_w_o, &self.gt_t_w_o, &self.symmetry)
+    }
+}
+
+/// Sets up the mock bin on `camera` and asks the stand-in detector for the initial pose;
+/// the session's request carries `calibration` for its render workers (`None`: the
+/// orchestrator's shipped one). Sessions started from it share the bin.
+pub async fn prepare_mock_session(
     camera: &str,
     spec: &MockSession,
     calibration: Option<&PartCalibration>,
     security: &ClientSecurity,
-    mut on_row: impl FnMut(&str, Option<&v1::SessionStep>),
-) -> anyhow::Result<RunOutcome> {
+) -> anyhow::Result<PreparedSession> {
     let part = v1::PartSpec {
         part: Some(v1::part_spec::Part::Builtin(spec.part.name().into())),
     };
     let mut mock = MockCameraServiceClient::new(channel(camera, security).await?);
-    let mut client = OrchestratorServiceClient::new(channel(orchestrator, security).await?);
     mock.set_up_scene(v1::SetUpSceneRequest {
         part: Some(part.clone()),
         instances: spec.instances,
@@ -205,44 +220,63 @@ pub async fn run_mock_session(
     let guess = stand_in_detector(&gt, &visibility, &first_t_w_c, &symmetry, spec.seed)
         .context("the mock bin holds no instance")?;
     let gt_t_w_o = gt[guess.target];
-    let deviation = |t: &Isometry3<f64>| pose_deviation(t, &gt_t_w_o, &symmetry);
-    let initial_deviation = deviation(&guess.initial_t_w_o);
-    on_row(
-        &format!(
-            "Initial pose: a stand-in detector (ground truth perturbed as in `glint eval \
-             refine`), {:.1} mm / {:.1}° off; instance {} of {}, {:.0} % visible from the \
-             first view.",
-            initial_deviation.translation_mm(),
-            initial_deviation.rotation_deg(),
-            guess.target + 1,
-            gt.len(),
-            100.0 * guess.visib_fract
-        ),
-        None,
+    let initial_deviation = pose_deviation(&guess.initial_t_w_o, &gt_t_w_o, &symmetry);
+    let detector_line = format!(
+        "Initial pose: a stand-in detector (ground truth perturbed as in `glint eval \
+         refine`), {:.1} mm / {:.1}° off; instance {} of {}, {:.0} % visible from the \
+         first view.",
+        initial_deviation.translation_mm(),
+        initial_deviation.rotation_deg(),
+        guess.target + 1,
+        gt.len(),
+        100.0 * guess.visib_fract
     );
+    let request = v1::StartSessionRequest {
+        part: Some(part),
+        initial_t_w_o: Some((&guess.initial_t_w_o).into()),
+        candidates_t_w_c: candidates,
+        policy: policy_message(spec.policy) as i32,
+        max_views: spec.max_views,
+        entropy_threshold_nats: spec.entropy_threshold_nats,
+        seed: spec.seed,
+        material: calibration.map(|c| material_to_message(&c.material)),
+        response: calibration.map(|c| response_to_message(&c.response)),
+        radiometric_scale: calibration.map_or(0.0, |c| c.radiometric_scale),
+        ..Default::default()
+    };
+    Ok(PreparedSession {
+        request,
+        gt_t_w_o,
+        symmetry,
+        initial_deviation,
+        detector_line,
+    })
+}
+
+/// Starts `prepared` on `orchestrator` and reads its steps as they stream; `on_row` gets
+/// each printed line, with the step it reports if it is a step's row.
+pub async fn run_prepared_session(
+    orchestrator: &str,
+    prepared: &PreparedSession,
+    security: &ClientSecurity,
+    mut on_row: impl FnMut(&str, Option<&v1::SessionStep>),
+) -> anyhow::Result<RunOutcome> {
+    let mut client = OrchestratorServiceClient::new(channel(orchestrator, security).await?);
+    // "VIEW_POLICY_NBV_CONST_SIGMA" → "nbv-const-sigma", as the CLI names it.
+    let policy = v1::ViewPolicy::try_from(prepared.request.policy).map_or("?".into(), |p| {
+        p.as_str_name()
+            .trim_start_matches("VIEW_POLICY_")
+            .to_lowercase()
+            .replace('_', "-")
+    });
     let id = client
-        .start_session(v1::StartSessionRequest {
-            part: Some(part),
-            initial_t_w_o: Some((&guess.initial_t_w_o).into()),
-            candidates_t_w_c: candidates,
-            policy: policy_message(spec.policy) as i32,
-            max_views: spec.max_views,
-            entropy_threshold_nats: spec.entropy_threshold_nats,
-            seed: spec.seed,
-            material: calibration.map(|c| material_to_message(&c.material)),
-            response: calibration.map(|c| response_to_message(&c.response)),
-            radiometric_scale: calibration.map_or(0.0, |c| c.radiometric_scale),
-            ..Default::default()
-        })
+        .start_session(prepared.request.clone())
         .await
         .map_err(status)
         .context("starting the session")?
         .into_inner()
         .session_id;
-    on_row(
-        &format!("Session {id}, policy {}.", spec.policy.name()),
-        None,
-    );
+    on_row(&format!("Session {id}, policy {policy}."), None);
     on_row(&table_header(), None);
     let mut stream = client
         .run_session(v1::RunSessionRequest {
@@ -257,7 +291,7 @@ pub async fn run_mock_session(
     while let Some(event) = stream.message().await.map_err(status)? {
         match event.event {
             Some(v1::session_event::Event::Step(step)) => {
-                let d = deviation(&pose(&step.t_w_o, "step pose")?);
+                let d = prepared.deviation(&pose(&step.t_w_o, "step pose")?);
                 on_row(&table_row(&step, Some(&d)), Some(&step));
                 deviations.push(d);
                 steps.push(step);
@@ -271,6 +305,23 @@ pub async fn run_mock_session(
         steps,
         session,
         deviations,
-        initial_deviation,
+        initial_deviation: prepared.initial_deviation,
     })
+}
+
+/// Sets up the mock bin on `camera`, asks the stand-in detector, runs a session on
+/// `orchestrator` with `calibration` for its render workers (`None`: the orchestrator's
+/// shipped one); `on_row` gets each printed line, with the step it reports if it is a step's
+/// row.
+pub async fn run_mock_session(
+    orchestrator: &str,
+    camera: &str,
+    spec: &MockSession,
+    calibration: Option<&PartCalibration>,
+    security: &ClientSecurity,
+    mut on_row: impl FnMut(&str, Option<&v1::SessionStep>),
+) -> anyhow::Result<RunOutcome> {
+    let prepared = prepare_mock_session(camera, spec, calibration, security).await?;
+    on_row(&prepared.detector_line, None);
+    run_prepared_session(orchestrator, &prepared, security, on_row).await
 }

@@ -294,17 +294,24 @@ impl OrchestratorService for OrchestratorServer {
         request: Request<v1::RunSessionRequest>,
     ) -> Result<Response<Self::RunSessionStream>, Status> {
         let id = session_id(&request.get_ref().session_id)?;
-        // Unknown or already running: answer at once rather than as a stream's error.
+        // Unknown, already running or no place free: answer at once rather than as a
+        // stream's error. A place is taken here, so the run below cannot be refused.
         let known = self.orchestrator.clone();
         let check_id = id.clone();
-        glint_server::blocking(move || known.get(&check_id))
-            .await?
-            .map_err(|e| status_of(&e))?;
+        glint_server::blocking(move || {
+            if known.get(&check_id)?.state.is_final() {
+                Ok(())
+            } else {
+                known.reserve(&check_id)
+            }
+        })
+        .await?
+        .map_err(|e| status_of(&e))?;
         let (tx, rx) = tokio::sync::mpsc::channel(64);
         let orchestrator = self.orchestrator.clone();
         tokio::task::spawn_blocking(move || {
             // A client that goes away does not stop the session: it runs to its end.
-            let result = orchestrator.run(&id, |step| {
+            let result = orchestrator.run_reserved(&id, |step| {
                 let event = v1::SessionEvent {
                     event: Some(v1::session_event::Event::Step(step_message(step))),
                 };

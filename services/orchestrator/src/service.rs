@@ -143,9 +143,19 @@ pub struct Orchestrator {
     /// The sensor's noise, calibrated at the first session that needs it.
     noise: Mutex<Option<NoiseModel>>,
     running: Mutex<HashSet<String>>,
+    /// Sessions run at once at most; more are refused as [`StageError::Overloaded`] rather
+    /// than queued, so the stages' work and the memory of captures stay bounded.
+    max_running: usize,
     cancelled: Mutex<HashMap<String, Arc<AtomicBool>>>,
     next_id: AtomicU64,
 }
+
+/// Sessions an orchestrator runs at once unless told otherwise: enough to keep a few render
+/// workers busy while another session captures, few enough that each step stays fast.
+pub const DEFAULT_MAX_RUNNING: usize = 4;
+
+/// How long a refused session is told to wait before asking again, ms: about one step.
+pub const OVERLOADED_RETRY_AFTER_MS: u64 = 1000;
 
 /// Candidate views a session gets from the camera when it names none.
 pub const DEFAULT_CANDIDATES: usize = 20;
@@ -167,9 +177,50 @@ impl Orchestrator {
             store,
             noise: Mutex::new(None),
             running: Mutex::new(HashSet::new()),
+            max_running: DEFAULT_MAX_RUNNING,
             cancelled: Mutex::new(HashMap::new()),
             next_id: AtomicU64::new(1),
         }
+    }
+
+    /// Runs at most `n` sessions at once (at least 1).
+    pub fn with_max_running(mut self, n: usize) -> Self {
+        self.max_running = n.max(1);
+        self
+    }
+
+    /// Takes a place for session `id` to run in, if it is not running already and a place is
+    /// free; [`Self::run_reserved`] then runs it and frees the place.
+    pub fn reserve(&self, id: &str) -> Result<(), StageError> {
+        let mut running = self.running.lock().map_err(poisoned)?;
+        self.admission(&running, id)?;
+        running.insert(id.to_owned());
+        Ok(())
+    }
+
+    fn release(&self, id: &str) {
+        if let Ok(mut running) = self.running.lock() {
+            running.remove(id);
+        }
+    }
+
+    fn admission(&self, running: &HashSet<String>, id: &str) -> Result<(), StageError> {
+        if running.contains(id) {
+            return Err(StageError::FailedPrecondition(format!(
+                "session {id} is already running; GetSession shows its progress"
+            )));
+        }
+        if running.len() >= self.max_running {
+            return Err(StageError::Overloaded {
+                message: format!(
+                    "{} sessions are running, the most this orchestrator runs at once \
+                     (--max-running-sessions); session {id} can run when one ends",
+                    running.len()
+                ),
+                retry_after_ms: OVERLOADED_RETRY_AFTER_MS,
+            });
+        }
+        Ok(())
     }
 
     fn noise_model(&self, t_w_c: &Isometry3<f64>) -> Result<NoiseModel, StageError> {
@@ -322,25 +373,40 @@ impl Orchestrator {
 
     /// Runs session `id` to its end (a finished one returns as it is); `on_step` sees each
     /// completed step. Blocks: call it from a blocking thread.
-    pub fn run(
+    pub fn run(&self, id: &str, on_step: impl FnMut(&StepRecord)) -> Result<Session, StageError> {
+        if self.get(id)?.state.is_final() {
+            return self.run_reserved(id, on_step);
+        }
+        self.reserve(id)?;
+        self.run_reserved(id, on_step)
+    }
+
+    /// [`Self::run`] for a session whose place [`Self::reserve`] took (a finished session
+    /// needs none); frees the place when it ends.
+    pub fn run_reserved(
         &self,
         id: &str,
         mut on_step: impl FnMut(&StepRecord),
     ) -> Result<Session, StageError> {
-        let stored = self
-            .store
-            .get(id)?
-            .ok_or_else(|| StageError::NotFound(format!("session_id: no session {id:?}")))?;
+        let stored = match self.store.get(id) {
+            Ok(Some(stored)) => stored,
+            Ok(None) => {
+                self.release(id);
+                return Err(StageError::NotFound(format!(
+                    "session_id: no session {id:?}"
+                )));
+            }
+            Err(e) => {
+                self.release(id);
+                return Err(e);
+            }
+        };
         if stored.session.state.is_final() {
+            self.release(id);
             for step in &stored.session.steps {
                 on_step(step);
             }
             return self.get(id);
-        }
-        if !self.running.lock().map_err(poisoned)?.insert(id.to_owned()) {
-            return Err(StageError::FailedPrecondition(format!(
-                "session {id} is already running; GetSession shows its progress"
-            )));
         }
         let flag = self
             .cancelled
@@ -372,14 +438,68 @@ impl Orchestrator {
             },
             || flag.load(Ordering::Relaxed),
         );
-        if let Ok(mut running) = self.running.lock() {
-            running.remove(id);
-        }
+        self.release(id);
         self.store.update(&session)?;
         match result {
             Ok(()) | Err(StageError::Cancelled) => {}
             Err(e) => tracing::warn!(session = %id, "session failed: {e}"),
         }
         self.get(id)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::local::{LocalEstimation, LocalPrediction};
+    use crate::stages::{CameraInfo, CapturedView};
+
+    /// A camera these tests never reach.
+    struct NoCamera;
+
+    impl CameraStage for NoCamera {
+        fn info(&self) -> Result<CameraInfo, StageError> {
+            Err(StageError::Unavailable("no camera".into()))
+        }
+        fn capture(&self, _: &Isometry3<f64>, _: u64) -> Result<CapturedView, StageError> {
+            Err(StageError::Unavailable("no camera".into()))
+        }
+        fn candidate_views(&self, _: usize) -> Result<Vec<Isometry3<f64>>, StageError> {
+            Err(StageError::Unavailable("no camera".into()))
+        }
+    }
+
+    #[test]
+    fn sessions_beyond_the_limit_are_refused_with_a_retry_hint_until_a_place_frees() {
+        let orchestrator = Orchestrator::new(
+            Arc::new(NoCamera),
+            Arc::new(LocalEstimation::default()),
+            Arc::new(LocalPrediction::default()),
+            Cell::unknown(),
+            Arc::new(MemoryStore::default()),
+        )
+        .with_max_running(2);
+        orchestrator.reserve("s1").unwrap();
+        orchestrator.reserve("s2").unwrap();
+        match orchestrator.reserve("s3") {
+            Err(StageError::Overloaded {
+                message,
+                retry_after_ms,
+            }) => {
+                assert_eq!(retry_after_ms, OVERLOADED_RETRY_AFTER_MS);
+                assert!(message.contains("--max-running-sessions"), "{message}");
+            }
+            other => panic!("expected Overloaded, got {other:?}"),
+        }
+        assert!(matches!(
+            orchestrator.reserve("s1"),
+            Err(StageError::FailedPrecondition(_))
+        ));
+        // A run that ends (here at once: no such session) frees its place.
+        assert!(matches!(
+            orchestrator.run_reserved("s2", |_| {}),
+            Err(StageError::NotFound(_))
+        ));
+        orchestrator.reserve("s3").unwrap();
     }
 }

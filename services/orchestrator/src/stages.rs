@@ -33,6 +33,12 @@ pub enum StageError {
     /// The session was cancelled.
     #[error("cancelled")]
     Cancelled,
+    /// Too much work is under way: try again after `retry_after_ms`.
+    #[error("{message} (retry after {retry_after_ms} ms)")]
+    Overloaded {
+        message: String,
+        retry_after_ms: u64,
+    },
     /// Anything else.
     #[error("{0}")]
     Internal(String),

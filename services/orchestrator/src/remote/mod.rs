@@ -71,6 +71,9 @@ pub fn request<T>(message: T, deadline: Duration) -> tonic::Request<T> {
 
 /// What a failed call means to a session. INVALID_ARGUMENT messages start with the field
 /// (`field: message`, as every Glint server writes them).
+/// The metadata key of gRPC's retry pushback (milliseconds to wait before a retry).
+pub const RETRY_PUSHBACK_KEY: &str = "grpc-retry-pushback-ms";
+
 pub fn stage_error(status: &tonic::Status) -> StageError {
     let message = status.message().to_owned();
     match status.code() {
@@ -96,6 +99,14 @@ pub fn status_of(error: &StageError) -> tonic::Status {
         StageError::FailedPrecondition(m) => tonic::Status::failed_precondition(m.clone()),
         StageError::Unavailable(m) => tonic::Status::unavailable(m.clone()),
         StageError::Cancelled => tonic::Status::cancelled("cancelled"),
+        StageError::Overloaded { retry_after_ms, .. } => {
+            // gRPC's retry pushback: clients wait this long before trying again.
+            let mut status = tonic::Status::resource_exhausted(error.to_string());
+            if let Ok(value) = retry_after_ms.to_string().parse() {
+                status.metadata_mut().insert(RETRY_PUSHBACK_KEY, value);
+            }
+            status
+        }
         StageError::Internal(m) => tonic::Status::internal(m.clone()),
     }
 }
@@ -119,5 +130,20 @@ mod tests {
             stage_error(&tonic::Status::deadline_exceeded("slow")),
             StageError::Unavailable(_)
         ));
+        // Overloaded: RESOURCE_EXHAUSTED with gRPC's retry pushback.
+        let status = status_of(&StageError::Overloaded {
+            message: "busy".into(),
+            retry_after_ms: 1000,
+        });
+        assert_eq!(status.code(), Code::ResourceExhausted);
+        assert_eq!(
+            status
+                .metadata()
+                .get(RETRY_PUSHBACK_KEY)
+                .unwrap()
+                .to_str()
+                .unwrap(),
+            "1000"
+        );
     }
 }
