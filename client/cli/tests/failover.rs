@@ -133,3 +133,76 @@ fn a_decision_survives_a_worker_killed_mid_way_and_a_returning_worker_is_used_ag
     let after = pool.stats().answered_by[&format!("http://{}", a.addr)];
     assert!(after > before, "the returning worker got no work");
 }
+
+#[test]
+fn a_decision_without_workers_waits_for_one_and_fails_naming_them_when_none_comes() {
+    let scene = set_up(&ActiveSceneSpec {
+        part: Part::Zigzag,
+        instances: 2,
+        seed: 6,
+        width_px: 320,
+        height_px: 256,
+        samples_per_pixel: 1,
+        candidates: 4,
+    })
+    .unwrap();
+    let calibration = Calibration::embedded(Part::Zigzag).unwrap().unwrap();
+    let object = prediction_object(&scene, &calibration, false).unwrap();
+    let request = PredictionRequest {
+        t_w_o: scene.initial_t_w_o,
+        candidates: (1..4).map(|i| (i, scene.candidates[i as usize])).collect(),
+        sigma: PredictionSigma::Rendered,
+        seed: 3,
+        with_maps: false,
+    };
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let config = PoolConfig {
+        retry_after: Duration::from_millis(100),
+        decision_deadline: Duration::from_secs(60),
+        ..PoolConfig::default()
+    };
+
+    // A name that resolves to nothing (a worker service scaled to zero): UNAVAILABLE at the
+    // decision's deadline, naming the workers and why there were none.
+    let none = RemotePrediction::new(
+        runtime.handle().clone(),
+        WorkerSource::Dns("no-such-worker.invalid:50051".into()),
+        PoolConfig {
+            decision_deadline: Duration::from_secs(1),
+            ..config
+        },
+    );
+    match none.predict(&object, &request) {
+        Err(glint_orchestrator::stages::StageError::Unavailable(m)) => {
+            assert!(m.contains("dns:no-such-worker.invalid:50051"), "{m}");
+            assert!(m.contains("resolving"), "{m}");
+        }
+        other => panic!("expected UNAVAILABLE, got {other:?}"),
+    }
+
+    // A worker that is not up yet: the decision waits and completes once it comes.
+    let free = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = free.local_addr().unwrap().to_string();
+    drop(free);
+    let pool = RemotePrediction::new(
+        runtime.handle().clone(),
+        WorkerSource::Static(vec![addr.clone()]),
+        config,
+    );
+    let answers = std::thread::scope(|s| {
+        let decision = s.spawn(|| pool.predict(&object, &request));
+        std::thread::sleep(Duration::from_millis(700));
+        let worker = common::serve(&["uncertainty", "--listen", &addr]);
+        let answers = decision.join().unwrap();
+        drop(worker);
+        answers
+    })
+    .unwrap();
+    assert_eq!(answers.len(), 3);
+    let local = LocalPrediction::default()
+        .predict(&object, &request)
+        .unwrap();
+    for (r, l) in answers.iter().zip(&local) {
+        assert_eq!(r.index, l.index);
+    }
+}

@@ -75,6 +75,14 @@ impl WorkerSource {
         }
         Ok(Self::Static(list))
     }
+
+    /// The workers as the flag gave them, for messages.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Static(list) => list.join(","),
+            Self::Dns(name) => format!("dns:{name}"),
+        }
+    }
 }
 
 /// How the pool spreads a decision.
@@ -135,6 +143,8 @@ pub struct RemotePrediction {
     /// The token and TLS settings of the calls to workers.
     security: ClientSecurity,
     workers: Mutex<Vec<Worker>>,
+    /// Why the last decision lacked workers, for the error a client sees.
+    last_problem: Mutex<Option<String>>,
     stats: Mutex<PoolStats>,
 }
 
@@ -174,6 +184,7 @@ impl RemotePrediction {
             config,
             security: ClientSecurity::default(),
             workers: Mutex::new(Vec::new()),
+            last_problem: Mutex::new(None),
             stats: Mutex::new(PoolStats::default()),
         }
     }
@@ -381,7 +392,26 @@ impl RemotePrediction {
         let queue = Mutex::new(queue);
         let results = Mutex::new(Vec::new());
         loop {
-            let ready = self.refresh(&self.resolve().await?)?;
+            // No worker yet (a name that resolves to nothing: a service scaled to zero, a
+            // worker not up yet) is waited out like a resting one, within the decision's
+            // deadline: the decision goes on when workers appear.
+            let addresses = match self.resolve().await {
+                Ok(addresses) => addresses,
+                Err(e) => {
+                    tracing::warn!("no render worker: {e}; waiting for one");
+                    if let Ok(mut last) = self.last_problem.lock() {
+                        *last = Some(e.to_string());
+                    }
+                    Vec::new()
+                }
+            };
+            if addresses.is_empty()
+                && let Ok(mut last) = self.last_problem.lock()
+                && last.is_none()
+            {
+                *last = Some("the worker list is empty".into());
+            }
+            let ready = self.refresh(&addresses)?;
             if !ready.is_empty() {
                 let tasks = ready.iter().flat_map(|&i| {
                     (0..self.config.in_flight_per_worker.max(1))
@@ -522,13 +552,24 @@ impl PredictionStage for RemotePrediction {
             .chunks(per_request)
             .map(|chunk| chunk.iter().map(|(i, t)| (*i, t.into())).collect())
             .collect();
+        if let Ok(mut last) = self.last_problem.lock() {
+            *last = None;
+        }
         let deadline = self.config.decision_deadline;
         let answers = self.handle.block_on(async {
             tokio::time::timeout(deadline, self.fan_out(queue, template, registration, key))
                 .await
                 .map_err(|_| {
+                    let why = self
+                        .last_problem
+                        .lock()
+                        .ok()
+                        .and_then(|p| p.clone())
+                        .map_or_else(String::new, |p| format!(" (last: {p})"));
                     StageError::Unavailable(format!(
-                        "the render workers did not finish the decision within {deadline:?}"
+                        "the render workers ({}) did not finish the decision within \
+                         {deadline:?}{why}",
+                        self.source.describe()
                     ))
                 })?
         })?;
