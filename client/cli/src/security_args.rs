@@ -55,28 +55,25 @@ impl ServerSecurityArgs {
         })
     }
 
-    /// How the orchestrator calls the stages. A TLS orchestrator calls over TLS and so needs
-    /// the CA of the stages' certificates.
+    /// How the orchestrator calls the stages: the same token, and over TLS trusting
+    /// `--tls-ca` (a TLS orchestrator needs it), presenting its own certificate.
     pub fn outbound(&self) -> anyhow::Result<ClientSecurity> {
-        let tls = match &self.tls_ca {
-            Some(ca) => Some(ClientTls::from_files(
-                ca,
-                self.tls_cert.as_deref(),
-                self.tls_key.as_deref(),
-            )?),
-            None => {
-                anyhow::ensure!(
-                    self.tls_cert.is_none(),
-                    "--tls-ca: the orchestrator calls the stages over TLS; give the CA that \
-                     signed their certificates"
-                );
-                None
-            }
+        anyhow::ensure!(
+            self.tls_cert.is_none() || self.tls_ca.is_some(),
+            "--tls-ca: the orchestrator calls the stages over TLS; give the CA that signed \
+             their certificates"
+        );
+        let (tls_cert, tls_key) = match self.tls_ca {
+            Some(_) => (self.tls_cert.clone(), self.tls_key.clone()),
+            None => (None, None),
         };
-        Ok(ClientSecurity {
-            token: token(&self.token_file)?,
-            tls,
-        })
+        ClientSecurityArgs {
+            token_file: self.token_file.clone(),
+            tls_ca: self.tls_ca.clone(),
+            tls_cert,
+            tls_key,
+        }
+        .client()
     }
 }
 

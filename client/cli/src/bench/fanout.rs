@@ -15,7 +15,6 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use glint_eval::active::{ActiveSceneSpec, Calibration, prediction_object, set_up};
 use glint_geometry::Part;
 use glint_geometry::io::write_file_atomically;
 use glint_orchestrator::local::LocalPrediction;
@@ -99,17 +98,14 @@ fn loopback(args: &FanoutBenchArgs) -> anyhow::Result<()> {
         !args.workers.is_empty() && args.workers.iter().all(|&n| (1..=16).contains(&n)),
         "--workers: give counts from 1 to 16, e.g. 1,2,4"
     );
-    let scene = set_up(&ActiveSceneSpec {
-        part: args.part,
-        instances: args.instances,
-        seed: args.seed,
-        width_px: args.resolution.0,
-        height_px: args.resolution.1,
-        samples_per_pixel: 2,
-        candidates: args.candidates as usize,
-    })?;
-    let calibration = Calibration::from_files_or_embedded(args.part, None, None)?;
-    let object = prediction_object(&scene, &calibration, true)?;
+    let (scene, object) = super::nbv::decision_scene(
+        args.part,
+        args.instances,
+        args.seed,
+        args.resolution,
+        args.candidates,
+        true,
+    )?;
     // Poses as a worker decodes them, so every configuration predicts the same bits.
     let wire = |t: &nalgebra::Isometry3<f64>| {
         nalgebra::Isometry3::try_from(&glint_proto::v1::Pose::from(t))

@@ -7,10 +7,11 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use glint_estimation::nbv::{PosePrior, plan_next_view};
-use glint_eval::active::{ActiveSceneSpec, Calibration, prediction_object, set_up};
+use glint_eval::active::{ActiveScene, ActiveSceneSpec, Calibration, prediction_object, set_up};
 use glint_geometry::Part;
 use glint_geometry::io::write_file_atomically;
 use glint_orchestrator::local::SdfCache;
+use glint_orchestrator::stages::PredictionObject;
 use glint_uncertainty::{PredictionSettings, candidate_seed, predict_candidate};
 use nalgebra::Matrix6;
 use rayon::prelude::*;
@@ -47,18 +48,39 @@ struct DecisionTimes {
     total_ms: f64,
 }
 
-pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
+/// The bin one NBV decision is benchmarked on (2 spp captures) and what the render workers
+/// know of it (the shipped calibration; with the bin rendered when `predict_bin`).
+pub fn decision_scene(
+    part: Part,
+    instances: u32,
+    seed: u64,
+    (width_px, height_px): (u32, u32),
+    candidates: u32,
+    predict_bin: bool,
+) -> anyhow::Result<(ActiveScene, PredictionObject)> {
     let scene = set_up(&ActiveSceneSpec {
-        part: args.part,
-        instances: args.instances,
-        seed: args.seed,
-        width_px: args.resolution.0,
-        height_px: args.resolution.1,
+        part,
+        instances,
+        seed,
+        width_px,
+        height_px,
         samples_per_pixel: 2,
-        candidates: args.candidates as usize,
+        candidates: candidates as usize,
     })?;
-    let calibration = Calibration::from_files_or_embedded(args.part, None, None)?;
-    let object = prediction_object(&scene, &calibration, args.predict_bin)?;
+    let calibration = Calibration::from_files_or_embedded(part, None, None)?;
+    let object = prediction_object(&scene, &calibration, predict_bin)?;
+    Ok((scene, object))
+}
+
+pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
+    let (scene, object) = decision_scene(
+        args.part,
+        args.instances,
+        args.seed,
+        args.resolution,
+        args.candidates,
+        args.predict_bin,
+    )?;
     let predictor = object.predictor(
         SdfCache::default()
             .grid(&object.object)
