@@ -121,6 +121,9 @@ pub struct PoolStats {
     pub resent: usize,
     /// RegisterObject calls made (a worker lacked the object).
     pub registered: usize,
+    /// Answers refused as invalid (wrong candidates, a Fisher information that is not a
+    /// finite symmetric positive semi-definite matrix); their candidates were re-sent.
+    pub rejected: usize,
     /// Bytes of the requests and responses' messages (protobuf encoded), both ways.
     pub request_bytes: usize,
     pub response_bytes: usize,
@@ -353,6 +356,22 @@ impl RemotePrediction {
             match answer {
                 Ok(response) => {
                     let response = response.into_inner();
+                    if let Err(problem) = check_answer(&batch, &response.predictions) {
+                        // Garbage from one worker (a bug, a bad build, bit rot) must not
+                        // decide the view: its candidates go to another worker.
+                        tracing::warn!(
+                            worker = %uri,
+                            "worker answered an invalid prediction ({problem}); re-sending its \
+                             {} candidate(s) to another worker", batch.len()
+                        );
+                        give_back(batch);
+                        self.count(|s| {
+                            s.resent += 1;
+                            s.rejected += 1;
+                        });
+                        self.rest(&uri);
+                        return Ok(TaskEnd::WorkerFailed);
+                    }
                     self.count(|s| {
                         *s.answered_by.entry(uri.clone()).or_default() += 1;
                         s.request_bytes += request_bytes;
@@ -435,6 +454,40 @@ impl RemotePrediction {
             tokio::time::sleep_until(wake.into()).await;
         }
     }
+}
+
+/// Whether a worker's `answer` to `batch` is one to use: exactly the batch's candidates, each
+/// with a Fisher information that is finite, symmetric and positive semi-definite (eq 21–22
+/// sums outer products, so anything else is garbage).
+fn check_answer(batch: &Batch, answer: &[v1::CandidatePrediction]) -> Result<(), String> {
+    let mut asked: Vec<u32> = batch.iter().map(|(i, _)| *i).collect();
+    let mut got: Vec<u32> = answer.iter().map(|p| p.candidate_index).collect();
+    asked.sort_unstable();
+    got.sort_unstable();
+    if asked != got {
+        return Err(format!("asked for candidates {asked:?}, answered {got:?}"));
+    }
+    for p in answer {
+        // Finite and symmetric by the conversion.
+        let information = p
+            .information
+            .as_ref()
+            .ok_or_else(|| format!("candidate {}: no information", p.candidate_index))
+            .and_then(|m| {
+                Matrix6::try_from(m).map_err(|e| format!("candidate {}: {e}", p.candidate_index))
+            })?;
+        let eigenvalues = information.symmetric_eigenvalues();
+        let scale = eigenvalues.amax().max(f64::MIN_POSITIVE);
+        if eigenvalues.min() < -1e-9 * scale {
+            return Err(format!(
+                "candidate {}: information is not positive semi-definite (eigenvalue {:.3e} \
+                 of {scale:.3e})",
+                p.candidate_index,
+                eigenvalues.min()
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// A worker's σ̌_z map (FLOAT32, NaN where missing, kept) and its cause map (MONO8 of the
