@@ -256,6 +256,23 @@ fn bad_session_requests_are_refused_naming_the_field() {
             .expect_err("no such session");
         assert_eq!(status.code(), Code::NotFound);
         assert!(status.message().contains("s999999"), "{status:?}");
+        // A request over gRPC's 4 MiB message limit (a 5 MiB "mesh") is refused whole before
+        // it is decoded — tonic answers OUT_OF_RANGE saying the limit — and the server goes
+        // on serving.
+        let oversized = v1::StartSessionRequest {
+            part: Some(v1::PartSpec {
+                part: Some(v1::part_spec::Part::Mesh(v1::MeshFile {
+                    data: vec![b' '; 5 << 20],
+                    ..Default::default()
+                })),
+            }),
+            ..good.clone()
+        };
+        let status = start(&mut client, oversized).await;
+        assert_eq!(status.code(), Code::OutOfRange, "{status:?}");
+        assert!(status.message().contains("4194304"), "{status:?}");
+        let status = start(&mut client, good.clone()).await;
+        assert_eq!(status.code(), Code::FailedPrecondition, "{status:?}");
     });
 }
 
