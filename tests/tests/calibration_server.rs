@@ -167,3 +167,109 @@ async fn calibrate_response_over_grpc_matches_the_library() {
         .unwrap()
         .unwrap();
 }
+
+/// A capture reader that reads nothing: the requests below fail validation before any read.
+struct NoCaptures;
+
+impl glint_calibration::bsdf_fit::scene_fit::CaptureReader for NoCaptures {
+    fn capture(
+        &self,
+        dir: &std::path::Path,
+    ) -> Result<
+        glint_calibration::bsdf_fit::scene_fit::Capture,
+        glint_calibration::bsdf_fit::scene_fit::CaptureReadError,
+    > {
+        Err(glint_calibration::bsdf_fit::scene_fit::CaptureReadError(
+            format!("{}: not read in this test", dir.display()).into(),
+        ))
+    }
+
+    fn exposure_stack(
+        &self,
+        dir: &std::path::Path,
+    ) -> Result<ExposureStack, glint_calibration::bsdf_fit::scene_fit::CaptureReadError> {
+        self.capture(dir).map(|_| unreachable!())
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn fit_bsdf_names_the_bad_field() {
+    let plain = TestServer::start(
+        tonic::service::Routes::new(Calibration.into_service()),
+        SERVICE_NAME,
+    )
+    .await;
+    let server = TestServer::start(
+        tonic::service::Routes::new(
+            Calibration
+                .with_capture_reader(std::sync::Arc::new(NoCaptures))
+                .into_service(),
+        ),
+        SERVICE_NAME,
+    )
+    .await;
+    let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../assets/calibration/zigzag/response.json");
+    let response =
+        response_to_message(&glint_calibration::response::ResponseTable::load(&shipped).unwrap());
+    let dir = tempfile::tempdir().unwrap();
+    let good = v1::FitBsdfRequest {
+        scene_dir: dir.path().to_str().unwrap().to_owned(),
+        response: Some(response),
+        views: vec![0],
+        iterations: 5,
+        starts: vec![0.5],
+    };
+    let status = |target: String, request: v1::FitBsdfRequest| async move {
+        let mut client = CalibrationServiceClient::connect(target).await.unwrap();
+        client.fit_bsdf(request).await.map(|_| ()).unwrap_err()
+    };
+    // Without a capture reader the server does not fit.
+    let s = status(plain.target.clone(), good.clone()).await;
+    assert_eq!(s.code(), tonic::Code::Unimplemented, "{s:?}");
+
+    let cases = [
+        (
+            v1::FitBsdfRequest {
+                scene_dir: dir.path().join("missing").to_str().unwrap().to_owned(),
+                ..good.clone()
+            },
+            "scene_dir",
+        ),
+        (
+            v1::FitBsdfRequest {
+                scene_dir: String::new(),
+                ..good.clone()
+            },
+            "scene_dir",
+        ),
+        (
+            v1::FitBsdfRequest {
+                response: None,
+                ..good.clone()
+            },
+            "response",
+        ),
+        (
+            v1::FitBsdfRequest {
+                iterations: 20_000,
+                ..good.clone()
+            },
+            "iterations",
+        ),
+        (
+            v1::FitBsdfRequest {
+                starts: vec![0.5, 1.0],
+                ..good.clone()
+            },
+            "starts[1]",
+        ),
+        // An empty folder is no capture.
+        (good.clone(), "scene_dir"),
+    ];
+    for (request, field) in cases {
+        let s = status(server.target.clone(), request).await;
+        assert_eq!(s.code(), tonic::Code::InvalidArgument, "{s:?}");
+        assert!(s.message().starts_with(field), "{field}: {s:?}");
+    }
+}

@@ -3,16 +3,19 @@
 //! the mock camera's hidden ground truth (separate `eval-*` commands: calibration never reads
 //! ground truth).
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
+use glint_calibration::bsdf_fit::scene_fit::{
+    Capture, CaptureReadError, CaptureReader, CaptureView, LossChoice, SceneFitConfig, fit_scene,
+    fit_views, read_capture, rendering_of,
+};
 use glint_calibration::bsdf_fit::{
-    FREE_NAMES, FitConfig, FitProblem, FitTarget, FitView, Loss, MeasuredTarget, PixelRendering,
-    Residual, StartFits, error_map_png, fit_history_png, free_of, measured_target,
+    FitProblem, Loss, PixelRendering, Residual, error_map_png, fit_history_png, free_of,
 };
 use glint_calibration::material_file::{GroundTruthMaterials, MaterialFile, MaterialFileError};
-use glint_calibration::material_map::params_to_map;
 use glint_calibration::response::{
     DebevecConfig, ExposureStack, ResponseTable, calibrate, response_png,
 };
@@ -22,7 +25,7 @@ use glint_render::integrator::{LightTransport, path_pixel};
 use glint_render::projector::Pattern;
 use glint_render::sensor::ResponseCurve;
 
-use glint_camera::dataset::calibration_scene::{self, CalibrationScene};
+use glint_camera::dataset::calibration_scene;
 use rayon::prelude::*;
 
 #[derive(clap::Subcommand)]
@@ -123,20 +126,6 @@ fn parse_residual(s: &str) -> Result<Residual, String> {
         "same" => Ok(Residual::SameSamples),
         "decorrelated" => Ok(Residual::Decorrelated),
         _ => Err(format!("residual {s:?} must be `same` or `decorrelated`")),
-    }
-}
-
-/// How to render pixels: `spp` samples with multi-path, one with single-path.
-fn rendering_of(transport: LightTransport, spp: u32, seed: u64) -> PixelRendering {
-    let samples_per_pixel = if transport == LightTransport::SinglePath {
-        1
-    } else {
-        spp
-    };
-    PixelRendering {
-        transport,
-        samples_per_pixel,
-        seed,
     }
 }
 
@@ -336,139 +325,72 @@ fn stem_with(path: &Path, suffix: &str) -> PathBuf {
     path.with_file_name(format!("{stem}.{suffix}"))
 }
 
-/// Fails unless `views` names distinct views of `loaded`.
-fn check_views(loaded: &CalibrationScene, views: &[u32]) -> anyhow::Result<()> {
-    for (i, im_id) in views.iter().enumerate() {
-        loaded.view(*im_id).context("--views")?;
-        if views[..i].contains(im_id) {
-            anyhow::bail!("--views: view {im_id} is given twice");
-        }
-    }
-    Ok(())
-}
+/// glint-camera's reader of calibration captures, for the fit in glint-calibration (which
+/// cannot depend on camera): `glint calibrate bsdf`, `eval-bsdf` and the calibration server
+/// read captures through it.
+pub struct CameraCaptures;
 
-/// Per view (image id) of `views`: the fit's view (camera, projector, object pixels on every
-/// `step`-th row and column with their measured radiance) and the measured target it came from.
-fn fit_views(
-    loaded: &CalibrationScene,
-    table: &ResponseTable,
-    views: &[u32],
-    rendering: &PixelRendering,
-    step: u32,
-) -> anyhow::Result<(Vec<FitView>, Vec<MeasuredTarget>)> {
-    let mut fit_views = Vec::with_capacity(views.len());
-    let mut measured_views = Vec::with_capacity(views.len());
-    for &im_id in views {
-        let view = loaded.view(im_id)?;
-        let stack = read_stack(&view.stack_dir)?;
-        let radiance_map = table.radiance_map(&stack)?;
-        let [camera, _] = loaded.rig.cameras(&view.t_w_c);
-        let projector = loaded.rig.projector(&view.t_w_c, Pattern::White);
-        let measured = measured_target(
-            &loaded.scene,
-            &camera,
-            &projector,
-            &loaded.part_instances,
-            loaded.bin_instance,
-            &loaded.reference,
-            &radiance_map,
-            rendering,
-        )
-        .with_context(|| format!("view {im_id} ({})", view.stack_dir.display()))?;
-        let mut target = FitTarget::default();
-        for (&(u, v), &r) in measured.target.pixels.iter().zip(&measured.target.radiance) {
-            if u % step == 0 && v % step == 0 {
-                target.pixels.push((u, v));
-                target.radiance.push(r);
-            }
-        }
-        fit_views.push(FitView {
-            camera,
-            projector,
-            target,
-        });
-        measured_views.push(measured);
+impl CaptureReader for CameraCaptures {
+    fn capture(&self, dir: &Path) -> Result<Capture, CaptureReadError> {
+        let loaded = calibration_scene::load(dir).map_err(|e| CaptureReadError(Box::new(e)))?;
+        Ok(Capture {
+            scene_dir: loaded.scene_dir,
+            obj_id: loaded.obj_id,
+            scene: loaded.scene,
+            part_instances: loaded.part_instances,
+            bin_instance: loaded.bin_instance,
+            reference: loaded.reference,
+            rig: loaded.rig,
+            views: loaded
+                .views
+                .into_iter()
+                .map(|v| CaptureView {
+                    im_id: v.im_id,
+                    t_w_c: v.t_w_c,
+                    stack_dir: v.stack_dir,
+                })
+                .collect(),
+        })
     }
-    Ok((fit_views, measured_views))
+
+    fn exposure_stack(&self, dir: &Path) -> Result<ExposureStack, CaptureReadError> {
+        let files = glint_camera::dataset::ExposureStackFiles::read(dir)
+            .map_err(|e| CaptureReadError(Box::new(e)))?;
+        ExposureStack::new(files.images, files.exposures_s, files.bit_depth)
+            .map_err(|e| CaptureReadError(Box::new(e)))
+    }
 }
 
 fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
-    let loaded = calibration_scene::load(&args.scene)?;
-    check_views(&loaded, &args.views)?;
+    let capture = read_capture(&CameraCaptures, &args.scene)?;
+    capture.fitted_views(&args.views).context("--views")?;
     let table = ResponseTable::load(&args.response)?;
-    let rendering = rendering_of(
-        args.transport.regularised(args.min_indirect_roughness),
-        args.spp,
-        1,
-    );
-    let step = args.pixel_step;
-    let (views, measured_views) = fit_views(&loaded, &table, &args.views, &rendering, step)?;
-
-    let loss = match args.loss {
-        LossArg::L2 => Loss::L2,
-        LossArg::Ln => {
-            // ε: 1 % of the mean target radiance (relative errors count above it).
-            let (sum, n) = views.iter().flat_map(|v| &v.target.radiance).fold(
-                (0.0f64, 0usize),
-                |(s, n), &r| {
-                    if r.is_finite() {
-                        (s + r as f64, n + 1)
-                    } else {
-                        (s, n)
-                    }
-                },
-            );
-            Loss::LnRadiance {
-                floor: (0.01 * sum / n.max(1) as f64) as f32,
-            }
-        }
-        LossArg::Huber => {
-            // δ: the 90th percentile of the target radiance.
-            let mut all: Vec<f32> = views
-                .iter()
-                .flat_map(|v| v.target.radiance.iter().copied())
-                .filter(|r| r.is_finite())
-                .collect();
-            all.sort_by(f32::total_cmp);
-            Loss::Huber {
-                delta: all.get(all.len() * 9 / 10).copied().unwrap_or(1.0),
-            }
-        }
-    };
-    let problem = FitProblem {
-        scene: &loaded.scene,
-        views: &views,
-        instances: &loaded.part_instances,
-        rendering,
-        residual: args.residual,
-        loss,
-        block_px: args.block_px,
-    };
-    let config = FitConfig {
+    let config = SceneFitConfig {
+        views: args.views.clone(),
         iterations: args.iterations,
+        transport: args.transport,
+        spp: args.spp,
+        pixel_step: args.pixel_step,
+        residual: args.residual,
+        loss: match args.loss {
+            LossArg::L2 => LossChoice::L2,
+            LossArg::Ln => LossChoice::Ln,
+            LossArg::Huber => LossChoice::Huber,
+        },
+        block_px: args.block_px,
         reseed: args.reseed,
-        final_min_indirect_roughness: Some(args.final_min_indirect_roughness),
-        ..FitConfig::default()
+        min_indirect_roughness: args.min_indirect_roughness,
+        final_min_indirect_roughness: args.final_min_indirect_roughness,
+        starts: args.start.clone(),
     };
     let bar = glint_eval::progress::bar((args.iterations * args.start.len()) as u64, "BSDF fit");
-    let StartFits { mut fits, best } =
-        problem.fit_from_starts(&config, &args.start, |_, _| bar.inc(1))?;
+    let fit = fit_scene(&CameraCaptures, capture, &table, &config, |_| {
+        bar.inc(1);
+        ControlFlow::Continue(())
+    })?;
     bar.finish_and_clear();
-    let elapsed_s: f64 = fits.iter().map(|f| f.result.elapsed_s).sum();
-    let starts: Vec<_> = fits
-        .iter()
-        .map(|f| {
-            serde_json::json!({
-                "start": f.start,
-                "params": params_to_map(&f.result.params),
-                "final_loss": f.result.loss.last(),
-                "judged_l2": f.judged_l2,
-                "elapsed_s": f.result.elapsed_s,
-            })
-        })
-        .collect();
-    if fits.len() > 1 {
-        for f in &fits {
+    if fit.starts.len() > 1 {
+        for f in &fit.starts {
             let p = &f.result.params;
             println!(
                 "  start {}: base_color {:.3}, metallic {:.3}, roughness {:.3}, specular {:.3}; unbiased L2 {:.4}",
@@ -476,49 +398,14 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
             );
         }
     }
-    let result = fits.swap_remove(best).result;
-
-    let label = format!("obj {}", loaded.obj_id);
-    let per_view: Vec<_> = args
-        .views
-        .iter()
-        .zip(&measured_views)
-        .zip(&views)
-        .map(|((im_id, m), v)| {
-            serde_json::json!({
-                "im_id": im_id,
-                "pixels": v.target.pixels.len(),
-                "unmeasured_pixels": m.unmeasured_pixels,
-                "radiometric_scale": m.scale,
-                "reference_pixels": m.reference_pixels,
-            })
-        })
-        .collect();
-    let provenance = serde_json::json!({
-        "scene": loaded.scene_dir,
-        "obj_id": loaded.obj_id,
-        "views": args.views,
-        "free": FREE_NAMES,
-        "transport": format!("{:?}", rendering.transport),
-        "samples_per_pixel": rendering.samples_per_pixel,
-        "residual": format!("{:?}", args.residual),
-        "loss": format!("{loss:?}"),
-        "block_px": args.block_px,
-        "reseed": args.reseed,
-        "final_min_indirect_roughness": args.final_min_indirect_roughness,
-        "starts": starts,
-        "pixel_step": step,
-        "pixels": result.pixels,
-        "per_view": per_view,
-        "elapsed_s": elapsed_s,
-        "loss": result.loss,
-        "trajectory": result.trajectory,
-    });
+    let result = &fit.result;
+    let label = format!("obj {}", fit.capture.obj_id);
     // Plots first, the material last: a material file on disk means the run completed.
     let history = stem_with(&args.out, "history.png");
-    write_file_atomically(&history, &fit_history_png(&result, &label, None)?)?;
-    let rendered = problem.render(&result.params);
+    write_file_atomically(&history, &fit_history_png(result, &label, None)?)?;
+    let rendered = fit.problem().render(&result.params);
     let error = stem_with(&args.out, "error.png");
+    let views = &fit.views;
     let k = &views[0].camera.intrinsics;
     write_file_atomically(
         &error,
@@ -531,18 +418,15 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
             0.25,
         )?,
     )?;
-    let serde_json::Value::Object(provenance) = provenance else {
-        unreachable!("a JSON object literal")
-    };
-    MaterialFile::new(&result.params, provenance).save(&args.out)?;
+    MaterialFile::new(&result.params, fit.provenance.clone()).save(&args.out)?;
     println!(
         "bsdf: {} — {} part instances, views {:?}: {} object pixels in the loss",
-        loaded.scene_dir.display(),
-        loaded.part_instances.len(),
-        args.views,
+        fit.capture.scene_dir.display(),
+        fit.capture.part_instances.len(),
+        fit.im_ids,
         result.pixels,
     );
-    for (im_id, m) in args.views.iter().zip(&measured_views) {
+    for (im_id, m) in fit.im_ids.iter().zip(&fit.measured) {
         println!(
             "  view {im_id}: {} unmeasured pixels (saturated or black in every exposure), scale {:.4e} from {} reference pixels",
             m.unmeasured_pixels, m.scale, m.reference_pixels
@@ -558,7 +442,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         result.loss[0],
         result.loss[result.loss.len() - 1],
         args.iterations,
-        elapsed_s,
+        fit.elapsed_s,
         args.out.display()
     );
     Ok(())
@@ -570,7 +454,7 @@ type PartRadiance = (u32, u32, Vec<(u32, u32)>, [Vec<f32>; 2]);
 /// The part's interior pixels (3 × 3 all part instances) seen from `t_w_c`, and their radiance
 /// with each of `materials` on every part instance (rendered alike with `rendering`).
 fn part_radiance(
-    loaded: &CalibrationScene,
+    loaded: &Capture,
     t_w_c: &nalgebra::Isometry3<f64>,
     materials: [&PrincipledParams<f32>; 2],
     rendering: &PixelRendering,
@@ -659,7 +543,7 @@ fn read_truth(path: &Path) -> anyhow::Result<(PrincipledParams<f32>, Option<Stri
 }
 
 fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
-    let loaded = calibration_scene::load(&args.scene)?;
+    let loaded = read_capture(&CameraCaptures, &args.scene)?;
     let material = MaterialFile::load(&args.material)?;
     let fitted = material.params()?;
     let fitted_views: Vec<u32> = material
@@ -728,7 +612,14 @@ fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
     }
     if let Some(response) = &args.response {
         let table = ResponseTable::load(response)?;
-        let (views, _) = fit_views(&loaded, &table, &fitted_views, &rendering, 1)?;
+        let (views, _) = fit_views(
+            &CameraCaptures,
+            &loaded,
+            &table,
+            &fitted_views,
+            &rendering,
+            1,
+        )?;
         let problem = FitProblem {
             scene: &loaded.scene,
             views: &views,

@@ -205,6 +205,12 @@ fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
         .context("starting the async runtime")
 }
 
+/// The calibration server, reading FitBsdf's captures with glint-camera's reader.
+fn calibration_server() -> glint_calibration::server::CalibrationServer {
+    glint_calibration::server::Calibration
+        .with_capture_reader(Arc::new(crate::calibrate_cmd::CameraCaptures))
+}
+
 /// The orchestrator over gRPC stages at `camera`, `estimation` and `workers`.
 fn orchestrator(
     camera: &str,
@@ -267,7 +273,7 @@ fn all_services(
         .camera
         .camera()?
         .into_routes()
-        .add_service(glint_calibration::server::Calibration.into_service())
+        .add_service(calibration_server().into_service())
         .add_service(glint_uncertainty::server::Uncertainty::default().into_service())
         .add_service(glint_estimation::server::Estimation::default().into_service())
         .add_service(OrchestratorServer::new(orchestrator.clone()).into_service());
@@ -346,7 +352,7 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
                 )
             }
             Stage::Calibration => (
-                tonic::service::Routes::new(glint_calibration::server::Calibration.into_service()),
+                tonic::service::Routes::new(calibration_server().into_service()),
                 vec![glint_calibration::server::SERVICE_NAME],
             ),
             Stage::Uncertainty => (

@@ -220,6 +220,33 @@ fn bsdf_fit_on_a_captured_zigzag_recovers_its_material() {
         "roughness {roughness}: {out}"
     );
 
+    // The calibration server fits the same capture with the same code: FitBsdf over gRPC
+    // streams one progress message per iteration and ends with the command's material.
+    let (progress, result) = fit_over_grpc(&capture, &g, 100);
+    assert_eq!(progress.len(), 100);
+    assert!(
+        progress
+            .iter()
+            .enumerate()
+            .all(|(i, p)| p.iteration as usize == i && p.iterations_total == 100)
+    );
+    assert!(result.final_loss < progress[0].loss, "{result:?}");
+    let fitted = result.material.unwrap();
+    for (name, value) in [
+        ("base_color", fitted.base_color),
+        ("metallic", fitted.metallic),
+        ("roughness", fitted.roughness),
+        ("specular", fitted.specular),
+    ] {
+        // The parameters are f32; the file prints each as its shortest f32.
+        assert_eq!(
+            value as f32,
+            p(name) as f32,
+            "{name}: server {value}, command {}",
+            p(name)
+        );
+    }
+
     // Evaluation (reads the capture's ground truth): the fitted material rendered from the
     // held-out view 1 against the hidden one, both with the same samples.
     let o = glint(&[
@@ -342,4 +369,42 @@ fn bad_calibration_inputs_are_clear_errors_without_output() {
     )
     .unwrap();
     fails_with(eval(&material), &["every view", "--held-out-view"]);
+}
+
+/// `glint serve calibration` fits `capture` (view 0) with `response` over gRPC: the progress
+/// messages and the result.
+fn fit_over_grpc(
+    capture: &Path,
+    response: &Path,
+    iterations: u32,
+) -> (
+    Vec<glint_proto::v1::FitProgress>,
+    glint_proto::v1::FitBsdfResult,
+) {
+    use glint_proto::v1;
+    use glint_proto::v1::calibration_service_client::CalibrationServiceClient;
+    let server = common::serve(&["calibration", "--listen", "127.0.0.1:0"]);
+    let table = glint_calibration::response::ResponseTable::load(response).unwrap();
+    let request = v1::FitBsdfRequest {
+        scene_dir: capture.to_string_lossy().into_owned(),
+        response: Some(glint_calibration::server::response_to_message(&table)),
+        views: vec![0],
+        iterations,
+        starts: Vec::new(),
+    };
+    tokio::runtime::Runtime::new().unwrap().block_on(async {
+        let mut client = CalibrationServiceClient::connect(format!("http://{}", server.addr))
+            .await
+            .unwrap();
+        let mut stream = client.fit_bsdf(request).await.unwrap().into_inner();
+        let (mut progress, mut result) = (Vec::new(), None);
+        while let Some(event) = stream.message().await.unwrap() {
+            match event.event {
+                Some(v1::fit_bsdf_event::Event::Progress(p)) => progress.push(p),
+                Some(v1::fit_bsdf_event::Event::Result(r)) => result = Some(r),
+                None => {}
+            }
+        }
+        (progress, result.expect("the stream ends with the result"))
+    })
 }

@@ -2,15 +2,29 @@
 //! request, run the library on the blocking pool, encode. Errors map to codes: bad input →
 //! INVALID_ARGUMENT naming the field; a stack with too few well-exposed pixels →
 //! FAILED_PRECONDITION.
+//!
+//! `FitBsdf` reads a capture on the server's disk in glint-camera's formats, which this crate
+//! cannot depend on: it is served by a [`CalibrationServer`] built with a [`CaptureReader`]
+//! ([`Calibration::with_capture_reader`]); plain [`Calibration`] answers UNIMPLEMENTED.
 
+use std::ops::ControlFlow;
+use std::path::PathBuf;
 use std::pin::Pin;
+use std::sync::Arc;
 
 use glint_geometry::image::Image;
 use glint_proto::chunks::{ArrayAssembler, AssembledArray};
 use glint_proto::v1;
 use glint_proto::v1::calibration_service_server::{CalibrationService, CalibrationServiceServer};
+use glint_render::bsdf::PrincipledParams;
+use tokio_stream::wrappers::ReceiverStream;
 use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
+
+use crate::bsdf_fit::FitError;
+use crate::bsdf_fit::scene_fit::{
+    CaptureReader, SceneFitConfig, SceneFitError, fit_scene, read_capture,
+};
 
 use crate::response::{
     DebevecConfig, ExposureStack, ForwardTable, InverseTable, ResponseError, ResponseTable,
@@ -20,14 +34,126 @@ use crate::response::{
 /// The service's name, as health reports it.
 pub const SERVICE_NAME: &str = "glint.v1.CalibrationService";
 
-/// The calibration service; stateless.
+/// The calibration service without a capture reader: `CalibrateResponse` only (`FitBsdf`
+/// answers UNIMPLEMENTED).
 #[derive(Clone, Debug, Default)]
 pub struct Calibration;
 
 impl Calibration {
     /// The tonic service to add to a server's routes.
+    pub fn into_service(self) -> CalibrationServiceServer<CalibrationServer> {
+        CalibrationServer { captures: None }.into_service()
+    }
+
+    /// The service with `FitBsdf` reading captures through `reader`.
+    pub fn with_capture_reader(self, reader: Arc<dyn CaptureReader>) -> CalibrationServer {
+        CalibrationServer {
+            captures: Some(reader),
+        }
+    }
+}
+
+/// The calibration service; stateless but for the capture reader of `FitBsdf`.
+#[derive(Clone)]
+pub struct CalibrationServer {
+    captures: Option<Arc<dyn CaptureReader>>,
+}
+
+impl CalibrationServer {
+    /// The tonic service to add to a server's routes.
     pub fn into_service(self) -> CalibrationServiceServer<Self> {
         CalibrationServiceServer::new(self)
+    }
+}
+
+/// Adam iterations when a request gives 0, and the most a request may ask for.
+pub const DEFAULT_FIT_ITERATIONS: usize = 300;
+pub const MAX_FIT_ITERATIONS: usize = 10_000;
+/// Progress messages buffered for a slow client before the fit waits.
+const FIT_EVENTS_BUFFERED: usize = 16;
+
+/// A principled material as its message (the mirror of glint-camera's `material_to_message`,
+/// which this crate cannot reach).
+fn material_message(p: &PrincipledParams<f32>) -> v1::PrincipledMaterial {
+    v1::PrincipledMaterial {
+        base_color: f64::from(p.base_color),
+        metallic: f64::from(p.metallic),
+        roughness: f64::from(p.roughness),
+        specular: f64::from(p.specular),
+        spec_tint: f64::from(p.spec_tint),
+        anisotropic: f64::from(p.anisotropic),
+        sheen: f64::from(p.sheen),
+        sheen_tint: f64::from(p.sheen_tint),
+        clearcoat: f64::from(p.clearcoat),
+        clearcoat_gloss: f64::from(p.clearcoat_gloss),
+    }
+}
+
+/// A validated FitBsdf request: the capture folder, the response, the fit's settings
+/// (the library's defaults, which are `glint calibrate bsdf`'s, but views, iterations and
+/// starts). Rejections name the field.
+pub fn fit_request(
+    msg: &v1::FitBsdfRequest,
+) -> Result<(PathBuf, ResponseTable, SceneFitConfig), Status> {
+    if msg.scene_dir.is_empty() {
+        return Err(Status::invalid_argument("scene_dir: is empty"));
+    }
+    let dir = PathBuf::from(&msg.scene_dir);
+    if let Err(e) = std::fs::read_dir(&dir) {
+        return Err(Status::invalid_argument(format!(
+            "scene_dir: {} is not a readable directory on the server: {e}",
+            dir.display()
+        )));
+    }
+    let response = msg
+        .response
+        .as_ref()
+        .ok_or_else(|| Status::invalid_argument("response: is required"))?;
+    let table = response_from_message(response).map_err(|e| Status::from(e.within("response")))?;
+    let iterations = match msg.iterations as usize {
+        0 => DEFAULT_FIT_ITERATIONS,
+        n if n > MAX_FIT_ITERATIONS => {
+            return Err(Status::invalid_argument(format!(
+                "iterations: is {n}, but at most {MAX_FIT_ITERATIONS}"
+            )));
+        }
+        n => n,
+    };
+    if let Some(i) = msg.starts.iter().position(|s| !(*s > 0.0 && *s < 1.0)) {
+        return Err(Status::invalid_argument(format!(
+            "starts[{i}]: is {}, but must be in (0, 1)",
+            msg.starts[i]
+        )));
+    }
+    let defaults = SceneFitConfig::default();
+    let config = SceneFitConfig {
+        views: msg.views.clone(),
+        iterations,
+        starts: if msg.starts.is_empty() {
+            defaults.starts.clone()
+        } else {
+            msg.starts.iter().map(|&s| s as f32).collect()
+        },
+        ..defaults
+    };
+    Ok((dir, table, config))
+}
+
+fn fit_status(e: SceneFitError) -> Status {
+    match &e {
+        SceneFitError::Capture { .. } | SceneFitError::Stack { .. } => {
+            Status::invalid_argument(format!("scene_dir: {e}"))
+        }
+        SceneFitError::NoView { index, .. } | SceneFitError::RepeatedView { index, .. } => {
+            Status::invalid_argument(format!("views[{index}]: {e}"))
+        }
+        SceneFitError::NoDefaultViews { .. } => Status::invalid_argument(format!("views: {e}")),
+        SceneFitError::Radiance { .. } => Status::invalid_argument(format!("response: {e}")),
+        SceneFitError::Target { .. } | SceneFitError::Fit(FitError::NoPixels { .. }) => {
+            Status::failed_precondition(e.to_string())
+        }
+        SceneFitError::Fit(FitError::Stopped { .. }) => Status::cancelled(e.to_string()),
+        SceneFitError::Fit(_) => Status::internal(e.to_string()),
     }
 }
 
@@ -228,7 +354,7 @@ async fn read_stack(
 type FitStream = Pin<Box<dyn Stream<Item = Result<v1::FitBsdfEvent, Status>> + Send>>;
 
 #[tonic::async_trait]
-impl CalibrationService for Calibration {
+impl CalibrationService for CalibrationServer {
     async fn calibrate_response(
         &self,
         request: Request<Streaming<v1::ExposureStackChunk>>,
@@ -248,13 +374,59 @@ impl CalibrationService for Calibration {
 
     async fn fit_bsdf(
         &self,
-        _request: Request<v1::FitBsdfRequest>,
+        request: Request<v1::FitBsdfRequest>,
     ) -> Result<Response<Self::FitBsdfStream>, Status> {
-        // The fit's set-up (measured radiance per view, the reference surface's scale) still
-        // lives in the CLI; it moves into this crate before it is served.
-        Err(Status::unimplemented(
-            "FitBsdf is not served yet: run `glint calibrate bsdf` on the capture",
-        ))
+        let Some(reader) = self.captures.clone() else {
+            return Err(Status::unimplemented(
+                "FitBsdf: this server was built without a capture reader; run `glint calibrate bsdf` on the capture",
+            ));
+        };
+        let (dir, table, config) = fit_request(request.get_ref())?;
+        // Read the capture and check the views before the stream starts, so that bad input is
+        // the call's status.
+        let capture = {
+            let (reader, views) = (reader.clone(), config.views.clone());
+            glint_server::blocking(move || {
+                let capture = read_capture(reader.as_ref(), &dir)?;
+                capture.fitted_views(&views)?;
+                Ok(capture)
+            })
+            .await?
+            .map_err(fit_status)?
+        };
+        let (tx, rx) = tokio::sync::mpsc::channel(FIT_EVENTS_BUFFERED);
+        tokio::task::spawn_blocking(move || {
+            use v1::fit_bsdf_event::Event;
+            let fitted = fit_scene(reader.as_ref(), capture, &table, &config, |p| {
+                let event = v1::FitBsdfEvent {
+                    event: Some(Event::Progress(v1::FitProgress {
+                        iteration: p.iteration as u32,
+                        iterations_total: p.iterations_total as u32,
+                        loss: p.loss,
+                        params: Some(material_message(&p.params)),
+                    })),
+                };
+                // A client that went away stops the fit.
+                match tx.blocking_send(Ok(event)) {
+                    Ok(()) => ControlFlow::Continue(()),
+                    Err(_) => ControlFlow::Break(()),
+                }
+            });
+            let last = match fitted {
+                Ok(fit) => Ok(v1::FitBsdfEvent {
+                    event: Some(Event::Result(v1::FitBsdfResult {
+                        material: Some(material_message(&fit.result.params)),
+                        final_loss: fit.result.loss.last().copied().unwrap_or(f64::NAN),
+                        judged_l2: fit.judged_l2,
+                        elapsed_s: fit.elapsed_s,
+                    })),
+                }),
+                Err(e) => Err(fit_status(e)),
+            };
+            // Nobody to tell if the client went away.
+            let _ = tx.blocking_send(last);
+        });
+        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
     }
 }
 

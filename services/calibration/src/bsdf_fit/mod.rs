@@ -24,11 +24,13 @@
 //!   [`FitConfig::fixed`] (default: their lobes off, as the mock camera's metals have them).
 
 mod plot;
+pub mod scene_fit;
 mod target;
 
 pub use plot::{error_map_png, fit_history_png};
 pub use target::{MeasuredTarget, TargetError, measured_target};
 
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 use glint_render::bsdf::PrincipledParams;
@@ -68,6 +70,8 @@ pub enum FitError {
     NoSuchInstance { instance: u32, instances: usize },
     #[error("{0}")]
     Config(String),
+    #[error("stopped by its caller after iteration {iteration}")]
+    Stopped { iteration: usize },
 }
 
 /// The object's pixels and their target radiance (same unit as the renderer, W·sr⁻¹·m⁻²).
@@ -581,12 +585,13 @@ impl FitProblem<'_> {
     /// is ignored), judged alike: the [`FitProblem::unbiased_l2`] of each result, rendered as
     /// the last iteration renders (final regularisation floor) but with seed [`JUDGE_SEED`]
     /// and, for multi-path, 4× the samples. A single start needs no judging (its `judged_l2` is NaN).
-    /// `progress(iteration, loss)` is called after every step of every fit.
+    /// `progress(iteration, loss, params)` is called after every step of every fit, as in
+    /// [`FitProblem::fit_with_progress`]; a `Break` stops all fits ([`FitError::Stopped`]).
     pub fn fit_from_starts(
         &self,
         config: &FitConfig,
         starts: &[f32],
-        mut progress: impl FnMut(usize, f64),
+        mut progress: impl FnMut(usize, f64, &PrincipledParams<f32>) -> ControlFlow<()>,
     ) -> Result<StartFits, FitError> {
         if starts.is_empty() {
             return Err(FitError::Config("no start values given".into()));
@@ -631,14 +636,16 @@ impl FitProblem<'_> {
 
     /// Runs Adam from `config.start` (see the module doc).
     pub fn fit(&self, config: &FitConfig) -> Result<FitResult, FitError> {
-        self.fit_with_progress(config, |_, _| {})
+        self.fit_with_progress(config, |_, _, _| ControlFlow::Continue(()))
     }
 
-    /// [`FitProblem::fit`], calling `progress(iteration, loss)` after every step.
+    /// [`FitProblem::fit`], calling `progress(iteration, loss, params)` after every step with
+    /// the loss before the step and the parameters it was evaluated at; a `Break` stops the fit
+    /// ([`FitError::Stopped`]: the caller no longer wants it, say a client that went away).
     pub fn fit_with_progress(
         &self,
         config: &FitConfig,
-        mut progress: impl FnMut(usize, f64),
+        mut progress: impl FnMut(usize, f64, &PrincipledParams<f32>) -> ControlFlow<()>,
     ) -> Result<FitResult, FitError> {
         self.check()?;
         let valid = config.iterations > 0
@@ -691,6 +698,7 @@ impl FitProblem<'_> {
             pixels = n;
             loss.push(l);
             trajectory.push(x);
+            let evaluated = with_free(config.fixed, x);
             let lr = config.learning_rate as f64
                 * decay.powf(k as f64 / (config.iterations.max(2) - 1) as f64);
             let (b1, b2) = (config.beta1 as f64, config.beta2 as f64);
@@ -702,7 +710,9 @@ impl FitProblem<'_> {
                 let step = lr * m_hat / (v_hat.sqrt() + 1e-10);
                 x[i] = ((x[i] as f64 - step).clamp(lower[i] as f64, 1.0)) as f32;
             }
-            progress(k, l);
+            if progress(k, l, &evaluated).is_break() {
+                return Err(FitError::Stopped { iteration: k });
+            }
         }
         let last = FitProblem {
             rendering: PixelRendering {

@@ -646,7 +646,9 @@ fn fits_from_several_starts_are_judged_by_their_loss() {
         ..FitConfig::default()
     };
     let fits = problem
-        .fit_from_starts(&config, &[0.9, 0.2], |_, _| {})
+        .fit_from_starts(&config, &[0.9, 0.2], |_, _, _| {
+            std::ops::ControlFlow::Continue(())
+        })
         .unwrap();
     assert_eq!(fits.fits.len(), 2);
     for fit in &fits.fits {
@@ -667,10 +669,14 @@ fn fits_from_several_starts_are_judged_by_their_loss() {
     assert!((a - b).abs() > 1e-3 * a.min(b), "{a} vs {b}");
     assert_eq!(fits.best, if a < b { 0 } else { 1 });
     // One start needs no judging; none is an error.
-    let one = problem.fit_from_starts(&config, &[0.5], |_, _| {}).unwrap();
+    let one = problem
+        .fit_from_starts(&config, &[0.5], |_, _, _| {
+            std::ops::ControlFlow::Continue(())
+        })
+        .unwrap();
     assert!(one.fits[0].judged_l2.is_nan() && one.best == 0);
     assert!(matches!(
-        problem.fit_from_starts(&config, &[], |_, _| {}),
+        problem.fit_from_starts(&config, &[], |_, _, _| std::ops::ControlFlow::Continue(())),
         Err(FitError::Config(_))
     ));
 }
