@@ -1,7 +1,8 @@
 //! A render worker that answers garbage (a Fisher information that is not positive
-//! semi-definite, or other candidates than asked) does not decide the view: the orchestrator's
-//! pool refuses its answers, re-sends those candidates to a sound worker, and the decision
-//! equals one made by the sound worker alone.
+//! semi-definite, or other candidates than asked) or answers too slowly does not decide the
+//! view: the orchestrator's pool refuses its answers (or gives up on them at the call's
+//! deadline), re-sends those candidates to a sound worker, and the decision equals one made
+//! by the sound worker alone.
 
 use glint_e2e::TestServer;
 use glint_eval::active::{ActiveSceneSpec, Calibration, prediction_object, set_up};
@@ -19,6 +20,8 @@ enum Lie {
     NotPsd,
     /// Answers for a candidate it was not asked about.
     WrongCandidate,
+    /// Answers nothing for 30 s (slow, not dead).
+    Slow,
 }
 
 struct LyingWorker(Lie);
@@ -36,6 +39,9 @@ impl UncertaintyService for LyingWorker {
         &self,
         request: Request<v1::PredictCandidatesRequest>,
     ) -> Result<Response<v1::PredictCandidatesResponse>, Status> {
+        if let Lie::Slow = self.0 {
+            tokio::time::sleep(std::time::Duration::from_secs(30)).await;
+        }
         let mut upper = vec![0.0; 21];
         upper[0] = -1.0; // (0,0) < 0: not positive semi-definite
         let predictions = request
@@ -44,12 +50,12 @@ impl UncertaintyService for LyingWorker {
             .iter()
             .map(|&i| v1::CandidatePrediction {
                 candidate_index: match self.0 {
-                    Lie::NotPsd => i,
+                    Lie::NotPsd | Lie::Slow => i,
                     Lie::WrongCandidate => i + 1000,
                 },
                 information: Some(v1::SymmetricMatrix6 {
                     upper: match self.0 {
-                        Lie::NotPsd => upper.clone(),
+                        Lie::NotPsd | Lie::Slow => upper.clone(),
                         Lie::WrongCandidate => vec![0.0; 21],
                     },
                 }),
@@ -136,5 +142,39 @@ async fn garbage_from_one_worker_is_refused_and_its_candidates_go_to_another() {
         }
         let _ = liar.stop().await;
     }
+    // A slow worker: its call passes its deadline (DEADLINE_EXCEEDED), its candidate goes to
+    // the sound worker, and the decision does not wait the 30 s out.
+    let slow = TestServer::start(
+        tonic::service::Routes::new(UncertaintyServiceServer::new(LyingWorker(Lie::Slow))),
+        "glint.v1.UncertaintyService",
+    )
+    .await;
+    let pool = RemotePrediction::new(
+        handle.clone(),
+        WorkerSource::Static(vec![slow.target.clone(), sound.target.clone()]),
+        PoolConfig {
+            call_deadline: std::time::Duration::from_millis(500),
+            ..config
+        },
+    );
+    let (object, request) = (object.clone(), request.clone());
+    let started = std::time::Instant::now();
+    let (answers, stats) = tokio::task::spawn_blocking(move || {
+        let answers = pool.predict(&object, &request);
+        (answers, pool.stats())
+    })
+    .await
+    .unwrap();
+    let answers = answers.unwrap();
+    assert!(stats.resent >= 1, "{stats:?}");
+    assert!(
+        started.elapsed() < std::time::Duration::from_secs(20),
+        "the decision waited for the slow worker: {:?}",
+        started.elapsed()
+    );
+    for (a, r) in answers.iter().zip(&reference) {
+        assert_eq!(a.information, r.information, "candidate {}", r.index);
+    }
+    let _ = slow.stop().await;
     let _ = sound.stop().await;
 }

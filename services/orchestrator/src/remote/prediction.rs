@@ -19,6 +19,7 @@
 
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use glint_geometry::image::Image;
@@ -172,6 +173,24 @@ fn is_worker_failure(code: Code) -> bool {
 /// One request's worth of candidates.
 type Batch = Vec<(u32, v1::Pose)>;
 
+/// One decision's shared work: the batches to send, the answers, and how many batches are out
+/// with workers.
+struct DecisionWork {
+    queue: Mutex<VecDeque<Batch>>,
+    results: Mutex<Vec<v1::CandidatePrediction>>,
+    out: AtomicUsize,
+}
+
+/// A batch taken from the queue and not yet answered or given back; counted down when dropped
+/// (after a give-back has queued it again).
+struct BatchOut<'a>(&'a AtomicUsize);
+
+impl Drop for BatchOut<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
 enum TaskEnd {
     /// The queue ran dry.
     Done,
@@ -299,20 +318,38 @@ impl RemotePrediction {
     async fn drain_into(
         &self,
         i: usize,
-        queue: &Mutex<VecDeque<Batch>>,
+        work: &DecisionWork,
         template: &v1::PredictCandidatesRequest,
         registration: &v1::RegisterObjectRequest,
         key: &str,
-        results: &Mutex<Vec<v1::CandidatePrediction>>,
     ) -> Result<TaskEnd, StageError> {
+        let (queue, results, out) = (&work.queue, &work.results, &work.out);
         let (uri, mut client) = self.worker(i)?;
         loop {
             if self.is_resting(&uri) {
                 return Ok(TaskEnd::WorkerFailed);
             }
-            let Some(batch) = queue.lock().map_err(poisoned)?.pop_front() else {
-                return Ok(TaskEnd::Done);
+            // Taken under the queue's lock, with the count of batches out, so that an idle
+            // task sees either work queued or work that may come back.
+            let (popped, batches_out) = {
+                let mut q = queue.lock().map_err(poisoned)?;
+                let popped = q.pop_front();
+                if popped.is_some() {
+                    out.fetch_add(1, Ordering::SeqCst);
+                }
+                (popped, out.load(Ordering::SeqCst))
             };
+            let Some(batch) = popped else {
+                if batches_out == 0 {
+                    return Ok(TaskEnd::Done);
+                }
+                // Batches out with other workers come back when one fails or passes its
+                // deadline: wait for them here, or a worker that is slow every time would
+                // take its batch back at each round and never let a sound worker have it.
+                tokio::time::sleep(Duration::from_millis(20)).await;
+                continue;
+            };
+            let _out = BatchOut(out);
             let give_back = |batch: Batch| {
                 if let Ok(mut q) = queue.lock() {
                     q.push_front(batch);
@@ -408,8 +445,11 @@ impl RemotePrediction {
         registration: v1::RegisterObjectRequest,
         key: String,
     ) -> Result<Vec<v1::CandidatePrediction>, StageError> {
-        let queue = Mutex::new(queue);
-        let results = Mutex::new(Vec::new());
+        let work = DecisionWork {
+            queue: Mutex::new(queue),
+            results: Mutex::new(Vec::new()),
+            out: AtomicUsize::new(0),
+        };
         loop {
             // No worker yet (a name that resolves to nothing: a service scaled to zero, a
             // worker not up yet) is waited out like a resting one, within the decision's
@@ -435,17 +475,15 @@ impl RemotePrediction {
                 let tasks = ready.iter().flat_map(|&i| {
                     (0..self.config.in_flight_per_worker.max(1))
                         .map(move |_| i)
-                        .map(|i| {
-                            self.drain_into(i, &queue, &template, &registration, &key, &results)
-                        })
+                        .map(|i| self.drain_into(i, &work, &template, &registration, &key))
                 });
                 let ends = futures_util::future::join_all(tasks).await;
                 for end in ends {
                     end?;
                 }
             }
-            if queue.lock().map_err(poisoned)?.is_empty() {
-                return results.into_inner().map_err(poisoned);
+            if work.queue.lock().map_err(poisoned)?.is_empty() {
+                return work.results.into_inner().map_err(poisoned);
             }
             // Every worker failed (or none was ready): wait for the first to wake, re-resolve.
             let wake = self
