@@ -7,8 +7,12 @@
 use glint_e2e::TestServer;
 use glint_eval::active::{ActiveSceneSpec, Calibration, prediction_object, set_up};
 use glint_geometry::Part;
-use glint_orchestrator::remote::prediction::{PoolConfig, RemotePrediction, WorkerSource};
-use glint_orchestrator::stages::{PredictionRequest, PredictionSigma, PredictionStage};
+use glint_orchestrator::remote::prediction::{
+    PoolConfig, PoolStats, RemotePrediction, WorkerSource,
+};
+use glint_orchestrator::stages::{
+    CandidateInformation, PredictionObject, PredictionRequest, PredictionSigma, PredictionStage,
+};
 use glint_proto::v1;
 use glint_proto::v1::uncertainty_service_server::{UncertaintyService, UncertaintyServiceServer};
 use tonic::{Request, Response, Status};
@@ -66,6 +70,23 @@ impl UncertaintyService for LyingWorker {
     }
 }
 
+/// One decision by `pool` on the blocking pool (it blocks on the runtime): its answers and
+/// what the pool did.
+async fn decide(
+    pool: RemotePrediction,
+    object: &PredictionObject,
+    request: &PredictionRequest,
+) -> (Vec<CandidateInformation>, PoolStats) {
+    let (object, request) = (object.clone(), request.clone());
+    let (answers, stats) = tokio::task::spawn_blocking(move || {
+        let answers = pool.predict(&object, &request);
+        (answers, pool.stats())
+    })
+    .await
+    .unwrap();
+    (answers.unwrap(), stats)
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn garbage_from_one_worker_is_refused_and_its_candidates_go_to_another() {
     let scene = set_up(&ActiveSceneSpec {
@@ -101,18 +122,12 @@ async fn garbage_from_one_worker_is_refused_and_its_candidates_go_to_another() {
     };
     let handle = tokio::runtime::Handle::current();
     // The reference: the sound worker alone.
-    let reference = {
-        let pool = RemotePrediction::new(
-            handle.clone(),
-            WorkerSource::Static(vec![sound.target.clone()]),
-            config,
-        );
-        let (object, request) = (object.clone(), request.clone());
-        tokio::task::spawn_blocking(move || pool.predict(&object, &request))
-            .await
-            .unwrap()
-            .unwrap()
-    };
+    let reference = RemotePrediction::new(
+        handle.clone(),
+        WorkerSource::Static(vec![sound.target.clone()]),
+        config,
+    );
+    let (reference, _) = decide(reference, &object, &request).await;
     for lie in [Lie::NotPsd, Lie::WrongCandidate] {
         let liar = TestServer::start(
             tonic::service::Routes::new(UncertaintyServiceServer::new(LyingWorker(lie))),
@@ -125,14 +140,7 @@ async fn garbage_from_one_worker_is_refused_and_its_candidates_go_to_another() {
             WorkerSource::Static(vec![liar.target.clone(), sound.target.clone()]),
             config,
         );
-        let (object, request) = (object.clone(), request.clone());
-        let (answers, stats) = tokio::task::spawn_blocking(move || {
-            let answers = pool.predict(&object, &request);
-            (answers, pool.stats())
-        })
-        .await
-        .unwrap();
-        let answers = answers.unwrap();
+        let (answers, stats) = decide(pool, &object, &request).await;
         assert!(stats.rejected >= 1, "{stats:?}");
         assert_eq!(stats.answered_by.get(&liar.target), None, "{stats:?}");
         assert_eq!(answers.len(), reference.len());
@@ -157,15 +165,8 @@ async fn garbage_from_one_worker_is_refused_and_its_candidates_go_to_another() {
             ..config
         },
     );
-    let (object, request) = (object.clone(), request.clone());
     let started = std::time::Instant::now();
-    let (answers, stats) = tokio::task::spawn_blocking(move || {
-        let answers = pool.predict(&object, &request);
-        (answers, pool.stats())
-    })
-    .await
-    .unwrap();
-    let answers = answers.unwrap();
+    let (answers, stats) = decide(pool, &object, &request).await;
     assert!(stats.resent >= 1, "{stats:?}");
     assert!(
         started.elapsed() < std::time::Duration::from_secs(20),

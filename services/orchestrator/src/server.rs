@@ -299,7 +299,7 @@ impl OrchestratorService for OrchestratorServer {
         let known = self.orchestrator.clone();
         let check_id = id.clone();
         glint_server::blocking(move || {
-            if known.get(&check_id)?.state.is_final() {
+            if known.state(&check_id)?.is_final() {
                 Ok(())
             } else {
                 known.reserve(&check_id)

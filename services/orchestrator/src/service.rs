@@ -66,6 +66,8 @@ pub trait SessionStore: Send + Sync {
     fn insert(&self, session: StoredSession) -> Result<(), StageError>;
     /// A session with its captures.
     fn get(&self, id: &str) -> Result<Option<StoredSession>, StageError>;
+    /// A session's state alone (no copy of its captures), `None` for an unknown id.
+    fn state(&self, id: &str) -> Result<Option<SessionState>, StageError>;
     /// Every session without its captures, oldest first.
     fn list(&self) -> Result<Vec<Session>, StageError>;
     /// Records a completed step (and the state it leaves the session in).
@@ -95,6 +97,16 @@ impl SessionStore for MemoryStore {
 
     fn get(&self, id: &str) -> Result<Option<StoredSession>, StageError> {
         Ok(self.sessions.lock().map_err(poisoned)?.1.get(id).cloned())
+    }
+
+    fn state(&self, id: &str) -> Result<Option<SessionState>, StageError> {
+        Ok(self
+            .sessions
+            .lock()
+            .map_err(poisoned)?
+            .1
+            .get(id)
+            .map(|s| s.session.state))
     }
 
     fn list(&self) -> Result<Vec<Session>, StageError> {
@@ -187,6 +199,13 @@ impl Orchestrator {
     pub fn with_max_running(mut self, n: usize) -> Self {
         self.max_running = n.max(1);
         self
+    }
+
+    /// Session `id`'s state, without copying its captures.
+    pub fn state(&self, id: &str) -> Result<SessionState, StageError> {
+        self.store
+            .state(id)?
+            .ok_or_else(|| StageError::NotFound(format!("session_id: no session {id:?}")))
     }
 
     /// Takes a place for session `id` to run in, if it is not running already and a place is
@@ -374,7 +393,7 @@ impl Orchestrator {
     /// Runs session `id` to its end (a finished one returns as it is); `on_step` sees each
     /// completed step. Blocks: call it from a blocking thread.
     pub fn run(&self, id: &str, on_step: impl FnMut(&StepRecord)) -> Result<Session, StageError> {
-        if self.get(id)?.state.is_final() {
+        if self.state(id)?.is_final() {
             return self.run_reserved(id, on_step);
         }
         self.reserve(id)?;
