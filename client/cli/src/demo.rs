@@ -15,9 +15,11 @@ use glint_camera::record::to_8bit;
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::parts::Part;
 use glint_geometry::pose_deviation::PoseDeviation;
-use glint_orchestrator::service::StoredSession;
 use glint_orchestrator::session::{StepRecord, ViewPolicy};
-use glint_orchestrator::stages::{PartCalibration, PredictionRequest, PredictionStage};
+use glint_orchestrator::stages::{
+    PartCalibration, PredictionObject, PredictionRequest, PredictionStage,
+};
+use glint_orchestrator::store::StoredSession;
 
 use crate::serve_cmd::{AllArgs, CameraArgs, FanOutArgs, InProcessServer};
 use glint_client::{MockSession, RunOutcome, run_mock_session, table_header};
@@ -120,6 +122,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
             camera: CameraArgs::empty(),
             workers: None,
             fan_out: args.fan_out.clone(),
+            state: Default::default(),
         };
         let server = InProcessServer::start(&all, Duration::from_secs(10)).await?;
         println!(
@@ -183,6 +186,10 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
             .orchestrator
             .stored(&outcome.session.session_id)
             .map_err(anyhow::Error::msg)?;
+        let object = server
+            .orchestrator
+            .prediction_object(&stored)
+            .map_err(anyhow::Error::msg)?;
         let orchestrator = server.orchestrator.clone();
         let out = out.clone();
         let error = outcome_error(&outcome).map(str::to_owned);
@@ -191,6 +198,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
                 &out,
                 &stored,
                 orchestrator.prediction.as_ref(),
+                object.as_ref(),
                 &outcome,
                 &rows,
             )
@@ -235,12 +243,13 @@ fn error_summary(outcome: &RunOutcome) -> String {
 fn predicted_map(
     stored: &StoredSession,
     prediction: &dyn PredictionStage,
+    object: Option<&PredictionObject>,
     step: &StepRecord,
     next: usize,
     stem: &Path,
 ) -> anyhow::Result<bool> {
     let (Some(object), Some(sigma)) = (
-        stored.prediction.as_ref(),
+        object,
         stored
             .session
             .config
@@ -274,6 +283,7 @@ fn write_report(
     out: &Path,
     stored: &StoredSession,
     prediction: &dyn PredictionStage,
+    object: Option<&PredictionObject>,
     outcome: &RunOutcome,
     table: &[String],
 ) -> anyhow::Result<PathBuf> {
@@ -305,7 +315,7 @@ fn write_report(
             .with_context(|| format!("writing {}", depth_path.display()))?;
         let stem = captures.join(format!("step{:02}_next_view_sigma", step.step));
         let next_map = match step.next_view {
-            Some(next) if predicted_map(stored, prediction, step, next, &stem)? => format!(
+            Some(next) if predicted_map(stored, prediction, object, step, next, &stem)? => format!(
                 "<img src=\"captures/step{:02}_next_view_sigma.png\" height=160>",
                 step.step
             ),

@@ -71,6 +71,32 @@ pub struct OrchestratorArgs {
     pub workers: String,
     #[command(flatten)]
     pub fan_out: FanOutArgs,
+    #[command(flatten)]
+    pub state: StateArgs,
+}
+
+/// Where the orchestrator keeps its sessions.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct StateArgs {
+    /// Keep sessions in this directory (a redb database and a blob directory of captures,
+    /// created if missing), so that they survive a crash or restart: an interrupted session
+    /// resumes after its last completed step when RunSession is called again. Without it,
+    /// sessions live in memory and end with the process.
+    #[arg(long = "state", value_name = "DIR", env = "GLINT_STATE_DIR")]
+    pub dir: Option<std::path::PathBuf>,
+}
+
+impl StateArgs {
+    /// The session store these flags ask for.
+    pub fn store(&self) -> anyhow::Result<Arc<dyn glint_orchestrator::store::SessionStore>> {
+        Ok(match &self.dir {
+            Some(dir) => Arc::new(
+                glint_orchestrator::store::DiskStore::open(dir)
+                    .with_context(|| format!("--state {}", dir.display()))?,
+            ),
+            None => Arc::new(glint_orchestrator::store::MemoryStore::default()),
+        })
+    }
 }
 
 /// How the orchestrator spreads and bounds its calls.
@@ -105,6 +131,8 @@ pub struct AllArgs {
     pub workers: Option<String>,
     #[command(flatten)]
     pub fan_out: FanOutArgs,
+    #[command(flatten)]
+    pub state: StateArgs,
 }
 
 /// The mock camera's initial scene, as `SetUpScene` would set it up; without `--part` the
@@ -217,6 +245,7 @@ fn orchestrator(
     estimation: &str,
     workers: &str,
     fan_out: &FanOutArgs,
+    state: &StateArgs,
     security: &glint_server::security::ClientSecurity,
 ) -> anyhow::Result<Arc<Orchestrator>> {
     use glint_orchestrator::remote::{self, prediction};
@@ -253,7 +282,7 @@ fn orchestrator(
             Arc::new(estimation),
             Arc::new(pool),
             cell,
-            Arc::new(glint_orchestrator::service::MemoryStore::default()),
+            state.store()?,
         )
         .with_max_running(fan_out.max_running_sessions as usize),
     ))
@@ -268,7 +297,7 @@ fn all_services(
     security: &glint_server::security::ClientSecurity,
 ) -> anyhow::Result<(tonic::service::Routes, Vec<&'static str>, Arc<Orchestrator>)> {
     let workers = all.workers.as_deref().unwrap_or(own);
-    let orchestrator = orchestrator(own, own, workers, &all.fan_out, security)?;
+    let orchestrator = orchestrator(own, own, workers, &all.fan_out, &all.state, security)?;
     let routes = all
         .camera
         .camera()?
@@ -374,6 +403,7 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
                         &o.estimation,
                         &o.workers,
                         &o.fan_out,
+                        &o.state,
                         &outbound,
                     )?)
                     .into_service(),

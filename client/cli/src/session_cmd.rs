@@ -1,4 +1,4 @@
-//! `glint session run|list|show|cancel`: a client of any deployment's orchestrator. `run`
+//! `glint session run|list|show|cancel|resume`: a client of any deployment's orchestrator. `run`
 //! sets up the mock camera's bin (`--part`), asks a stand-in detector for the initial pose
 //! (the mock's ground truth perturbed, evaluation only), starts a session and prints a row per
 //! step as the orchestrator streams it, with the pose error against the mock's truth.
@@ -42,6 +42,10 @@ pub enum SessionCommand {
     Show { id: String },
     /// Stop a session at its next stage boundary.
     Cancel { id: String },
+    /// Run a session the orchestrator holds (one created, or interrupted by a crash of an
+    /// orchestrator with --state): its completed steps are printed again, then it goes on
+    /// after the last one.
+    Resume { id: String },
 }
 
 #[derive(clap::Args, Clone)]
@@ -177,6 +181,31 @@ pub fn run(args: &SessionArgs) -> anyhow::Result<()> {
                 }
                 if !s.error.is_empty() {
                     println!("error: {}", s.error);
+                }
+            }
+            SessionCommand::Resume { id } => {
+                let mut client = OrchestratorServiceClient::new(channel(&args.orchestrator, &security).await?);
+                let mut stream = client
+                    .run_session(v1::RunSessionRequest {
+                        session_id: id.clone(),
+                    })
+                    .await
+                    .map_err(status)?
+                    .into_inner();
+                println!("{}", table_header());
+                while let Some(event) = stream.message().await.map_err(status)? {
+                    match event.event {
+                        Some(v1::session_event::Event::Step(step)) => {
+                            println!("{}", table_row(&step, None));
+                        }
+                        Some(v1::session_event::Event::Finished(s)) => {
+                            println!("{}", session_line(&s));
+                            if !s.error.is_empty() {
+                                anyhow::bail!("the session failed: {}", s.error);
+                            }
+                        }
+                        None => {}
+                    }
                 }
             }
             SessionCommand::Cancel { id } => {

@@ -53,6 +53,8 @@ class SessionState(str, enum.Enum):
     BUDGET_SPENT = "budget_spent"
     CANCELLED = "cancelled"
     FAILED = "failed"
+    # The orchestrator stopped while the session ran; run_session resumes it.
+    INTERRUPTED = "interrupted"
 
     @property
     def is_final(self) -> bool:

@@ -27,7 +27,7 @@ use crate::view::{
 pub const MAX_WINDOW_RADIUS_PX: u32 = 64;
 
 /// Which depth σ a refinement weighs points with.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum RefineSigma {
     /// From each view's pattern images (eq 1–5), the paper's method; the sensor's noise model
     /// is fitted from each view's noise shots.
@@ -37,7 +37,7 @@ pub enum RefineSigma {
 }
 
 /// How the estimator finds the part's pixels and weighs them.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RefineSettings {
     /// The hypothesis silhouette grows by this, metres at the part's depth, to hold the part
     /// when the hypothesis is off.

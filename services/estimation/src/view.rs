@@ -93,7 +93,7 @@ pub fn hypothesis_mask(
 
 /// A plane of the scene known not to be the part — a bin's floor, a table — from the cell's
 /// calibration: depth points on it or behind it are background, whatever mask they fall in.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BackgroundPlane {
     /// Unit normal, world frame, pointing to where the parts are.
     pub normal_w: nalgebra::Unit<nalgebra::Vector3<f64>>,

@@ -375,6 +375,123 @@ mod tests {
         session_config(scene, policy, max_views, None, 9, &Masking::default()).unwrap()
     }
 
+    /// What a broken camera does from its second capture on.
+    #[derive(Clone, Copy, Debug)]
+    enum CameraFault {
+        /// Depth NaN, infinite or negative everywhere.
+        BadDepth,
+        /// No pattern shots, no noise shots, no depth.
+        EmptyCapture,
+        /// No answer in time.
+        Timeout,
+    }
+
+    struct FaultyCamera<'a> {
+        inner: &'a dyn CameraStage,
+        fault: CameraFault,
+        captures: std::sync::atomic::AtomicUsize,
+    }
+
+    impl CameraStage for FaultyCamera<'_> {
+        fn info(&self) -> Result<glint_orchestrator::stages::CameraInfo, StageError> {
+            self.inner.info()
+        }
+        fn candidate_views(&self, count: usize) -> Result<Vec<Isometry3<f64>>, StageError> {
+            self.inner.candidate_views(count)
+        }
+        fn capture(
+            &self,
+            t_w_c: &Isometry3<f64>,
+            seed: u64,
+        ) -> Result<glint_orchestrator::stages::CapturedView, StageError> {
+            let n = self
+                .captures
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            if n == 0 {
+                return self.inner.capture(t_w_c, seed);
+            }
+            match self.fault {
+                CameraFault::Timeout => Err(StageError::Unavailable(
+                    "the camera did not answer within 5 s".into(),
+                )),
+                CameraFault::BadDepth => {
+                    let mut view = self.inner.capture(t_w_c, seed)?;
+                    let bad = [f32::NAN, f32::INFINITY, -0.5, f32::NEG_INFINITY];
+                    for (i, z) in view
+                        .measurement
+                        .depth
+                        .depth_m
+                        .data_mut()
+                        .iter_mut()
+                        .enumerate()
+                    {
+                        *z = bad[i % bad.len()];
+                    }
+                    Ok(view)
+                }
+                CameraFault::EmptyCapture => {
+                    let mut view = self.inner.capture(t_w_c, seed)?;
+                    let m = &mut view.measurement;
+                    m.left.clear();
+                    m.right.clear();
+                    m.noise_shots = None;
+                    m.depth.depth_m.data_mut().fill(f32::NAN);
+                    Ok(view)
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_broken_camera_fails_or_adds_nothing_never_panics_and_the_steps_before_are_kept() {
+        let scene = small_scene();
+        let estimation = LocalEstimation::default();
+        for fault in [
+            CameraFault::BadDepth,
+            CameraFault::EmptyCapture,
+            CameraFault::Timeout,
+        ] {
+            let camera = FaultyCamera {
+                inner: &scene.camera,
+                fault,
+                captures: Default::default(),
+            };
+            let stages = Stages {
+                camera: &camera,
+                estimation: &estimation,
+                prediction: None,
+            };
+            let mut session =
+                Session::new("t".into(), config(&scene, ViewPolicy::MaxDistance, 2)).unwrap();
+            let result = session::run(&mut session, &scene.object, &stages, |_| {}, || false);
+            let first = &session.steps[0];
+            match fault {
+                // Depth that is not a finite positive number is missing depth: the view adds
+                // no point, the pose and its information stay those of the first view.
+                CameraFault::BadDepth => {
+                    assert!(result.is_ok(), "{fault:?}: {result:?}");
+                    let second = &session.steps[1];
+                    assert_eq!(second.view_points, 0, "{fault:?}");
+                    assert_eq!(second.total_points, first.total_points, "{fault:?}");
+                    assert!(second.entropy_nats.is_finite());
+                }
+                // The rest end the session FAILED with the reason; step 0 is kept.
+                CameraFault::EmptyCapture | CameraFault::Timeout => {
+                    let error = result.unwrap_err().to_string();
+                    eprintln!("{fault:?}: {error}");
+                    assert_eq!(session.state, SessionState::Failed, "{fault:?}");
+                    assert_eq!(session.steps.len(), 1, "{fault:?}");
+                    assert_eq!(session.error.as_deref(), Some(error.as_str()));
+                    let expected = match fault {
+                        CameraFault::Timeout => "did not answer",
+                        _ => "views[1]",
+                    };
+                    assert!(error.contains(expected), "{fault:?}: {error}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn a_session_takes_distinct_views_until_its_budget_and_resumes_identically() {
         let scene = small_scene();

@@ -26,3 +26,12 @@ pub mod symmetry;
 pub use mesh::{LengthUnit, MeshError, MeshReport, TriMesh};
 pub use parts::Part;
 pub use symmetry::Symmetry;
+
+/// SHA-256 of `bytes`, lowercase hex: the content keys of meshes, objects and blobs.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}

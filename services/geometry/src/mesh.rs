@@ -252,30 +252,70 @@ impl TriMesh {
         )
     }
 
-    /// SHA-256 of the mesh's canonical encoding, lowercase hex: the vertex and triangle
-    /// counts (u64 little-endian), every vertex's x, y, z (f32 LE), every triangle's indices
-    /// (u32 LE). Equal meshes hash equal whatever file they came from: the key under which
-    /// stages cache a part.
-    pub fn content_sha256_hex(&self) -> String {
-        use sha2::{Digest, Sha256};
-        let mut hasher = Sha256::new();
-        hasher.update((self.vertices.len() as u64).to_le_bytes());
-        hasher.update((self.triangles.len() as u64).to_le_bytes());
+    /// The mesh's canonical encoding: the vertex and triangle counts (u64 little-endian),
+    /// every vertex's x, y, z (f32 LE), every triangle's indices (u32 LE). Exact: it reads
+    /// back bit for bit ([`Self::from_canonical_bytes`]).
+    pub fn canonical_bytes(&self) -> Vec<u8> {
+        let mut bytes = Vec::with_capacity(16 + 12 * (self.vertices.len() + self.triangles.len()));
+        bytes.extend_from_slice(&(self.vertices.len() as u64).to_le_bytes());
+        bytes.extend_from_slice(&(self.triangles.len() as u64).to_le_bytes());
         for v in &self.vertices {
             for c in [v.x, v.y, v.z] {
-                hasher.update(c.to_le_bytes());
+                bytes.extend_from_slice(&c.to_le_bytes());
             }
         }
         for t in &self.triangles {
             for i in t {
-                hasher.update(i.to_le_bytes());
+                bytes.extend_from_slice(&i.to_le_bytes());
             }
         }
-        hasher
-            .finalize()
+        bytes
+    }
+
+    /// The mesh of a [`Self::canonical_bytes`] encoding; `None` when the bytes are not one
+    /// (wrong length, an index out of range). Vertices are not validated beyond that.
+    pub fn from_canonical_bytes(bytes: &[u8]) -> Option<Self> {
+        let count = |at: usize| -> Option<usize> {
+            usize::try_from(u64::from_le_bytes(bytes.get(at..at + 8)?.try_into().ok()?)).ok()
+        };
+        let (n_vertices, n_triangles) = (count(0)?, count(8)?);
+        let expected = n_vertices
+            .checked_add(n_triangles)?
+            .checked_mul(12)?
+            .checked_add(16)?;
+        if bytes.len() != expected {
+            return None;
+        }
+        let word = |i: usize| -> [u8; 4] {
+            let at = 16 + 4 * i;
+            [bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]]
+        };
+        let vertices = (0..n_vertices)
+            .map(|v| {
+                let c = |k: usize| f32::from_le_bytes(word(3 * v + k));
+                Point3::new(c(0), c(1), c(2))
+            })
+            .collect();
+        let triangles: Vec<[u32; 3]> = (0..n_triangles)
+            .map(|t| {
+                let i = |k: usize| u32::from_le_bytes(word(3 * n_vertices + 3 * t + k));
+                [i(0), i(1), i(2)]
+            })
+            .collect();
+        if triangles
             .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect()
+            .flatten()
+            .any(|&i| i as usize >= n_vertices)
+        {
+            return None;
+        }
+        Some(Self::new(vertices, triangles))
+    }
+
+    /// SHA-256 of [`Self::canonical_bytes`], lowercase hex. Equal meshes hash equal whatever
+    /// file they came from: the key under which stages cache a part.
+    pub fn content_sha256_hex(&self) -> String {
+        crate::sha256_hex(&self.canonical_bytes())
     }
 
     /// The corners of triangle `i`.

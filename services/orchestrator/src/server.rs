@@ -223,6 +223,7 @@ fn state_message(state: SessionState) -> v1::SessionState {
         SessionState::BudgetSpent => v1::SessionState::BudgetSpent,
         SessionState::Cancelled => v1::SessionState::Cancelled,
         SessionState::Failed => v1::SessionState::Failed,
+        SessionState::Interrupted => v1::SessionState::Interrupted,
     }
 }
 

@@ -15,13 +15,18 @@ use glint_geometry::{Part, TriMesh};
 use nalgebra::Isometry3;
 
 use crate::session::{
-    CONST_SIGMA_Z_M, Cell, Masking, Session, SessionConfig, SessionState, Stages, StepRecord,
-    ViewPolicy,
+    CONST_SIGMA_Z_M, Cell, Journal, Masking, Session, SessionConfig, SessionState, Stages,
+    StepRecord, ViewPolicy,
 };
 use crate::stages::{
-    CameraStage, EstimationStage, PartCalibration, PredictionObject, PredictionStage,
+    CameraStage, CapturedView, EstimationStage, PartCalibration, PredictionObject, PredictionStage,
     SessionObject, StageError, calibrate_noise,
 };
+use crate::store::{SessionCalibration, SessionStore, StoredSession};
+
+fn poisoned<T>(_: T) -> StageError {
+    StageError::Internal("the orchestrator's lock was poisoned".into())
+}
 
 /// The part of a session.
 #[derive(Clone, Debug)]
@@ -48,100 +53,6 @@ pub struct SessionRequest {
     pub seed: u64,
     /// The part's calibration; `None`: the one Glint ships for a built-in part, if any.
     pub calibration: Option<PartCalibration>,
-}
-
-/// A session as the store keeps it: its state machine and what it runs on.
-#[derive(Clone, Debug)]
-pub struct StoredSession {
-    pub session: Session,
-    pub object: SessionObject,
-    /// The render workers' object (entropy policies only).
-    pub prediction: Option<PredictionObject>,
-}
-
-/// Where sessions live. In memory today ([`MemoryStore`]); a persistent store implements the
-/// same trait.
-pub trait SessionStore: Send + Sync {
-    /// Adds a new session.
-    fn insert(&self, session: StoredSession) -> Result<(), StageError>;
-    /// A session with its captures.
-    fn get(&self, id: &str) -> Result<Option<StoredSession>, StageError>;
-    /// A session's state alone (no copy of its captures), `None` for an unknown id.
-    fn state(&self, id: &str) -> Result<Option<SessionState>, StageError>;
-    /// Every session without its captures, oldest first.
-    fn list(&self) -> Result<Vec<Session>, StageError>;
-    /// Records a completed step (and the state it leaves the session in).
-    fn record_step(&self, id: &str, step: &StepRecord) -> Result<(), StageError>;
-    /// Replaces a session after a run (its steps, captures and final state).
-    fn update(&self, session: &Session) -> Result<(), StageError>;
-}
-
-/// Sessions in memory, lost when the process ends.
-#[derive(Default)]
-pub struct MemoryStore {
-    sessions: Mutex<(Vec<String>, HashMap<String, StoredSession>)>,
-}
-
-fn poisoned<T>(_: T) -> StageError {
-    StageError::Internal("the session store's lock was poisoned".into())
-}
-
-impl SessionStore for MemoryStore {
-    fn insert(&self, session: StoredSession) -> Result<(), StageError> {
-        let mut guard = self.sessions.lock().map_err(poisoned)?;
-        let (order, map) = &mut *guard;
-        order.push(session.session.id.clone());
-        map.insert(session.session.id.clone(), session);
-        Ok(())
-    }
-
-    fn get(&self, id: &str) -> Result<Option<StoredSession>, StageError> {
-        Ok(self.sessions.lock().map_err(poisoned)?.1.get(id).cloned())
-    }
-
-    fn state(&self, id: &str) -> Result<Option<SessionState>, StageError> {
-        Ok(self
-            .sessions
-            .lock()
-            .map_err(poisoned)?
-            .1
-            .get(id)
-            .map(|s| s.session.state))
-    }
-
-    fn list(&self) -> Result<Vec<Session>, StageError> {
-        let guard = self.sessions.lock().map_err(poisoned)?;
-        let (order, map) = &*guard;
-        Ok(order
-            .iter()
-            .filter_map(|id| map.get(id))
-            .map(|s| Session {
-                views: Vec::new(),
-                ..s.session.clone()
-            })
-            .collect())
-    }
-
-    fn record_step(&self, id: &str, step: &StepRecord) -> Result<(), StageError> {
-        let mut guard = self.sessions.lock().map_err(poisoned)?;
-        let stored = guard
-            .1
-            .get_mut(id)
-            .ok_or_else(|| StageError::NotFound(format!("session {id:?}")))?;
-        stored.session.state = SessionState::Running;
-        stored.session.steps.push(step.clone());
-        Ok(())
-    }
-
-    fn update(&self, session: &Session) -> Result<(), StageError> {
-        let mut guard = self.sessions.lock().map_err(poisoned)?;
-        let stored = guard
-            .1
-            .get_mut(&session.id)
-            .ok_or_else(|| StageError::NotFound(format!("session {:?}", session.id)))?;
-        stored.session = session.clone();
-        Ok(())
-    }
 }
 
 /// The orchestrator: its stages, what it knows of the cell, and its sessions.
@@ -180,6 +91,18 @@ impl Orchestrator {
         cell: Cell,
         store: Arc<dyn SessionStore>,
     ) -> Self {
+        // A restarted orchestrator numbers on after the sessions its store kept.
+        let last = match store.list() {
+            Ok(sessions) => sessions
+                .iter()
+                .filter_map(|s| crate::store::id_number(&s.id))
+                .max()
+                .unwrap_or(0),
+            Err(e) => {
+                tracing::error!("listing the stored sessions: {e}");
+                0
+            }
+        };
         Self {
             camera,
             estimation,
@@ -191,7 +114,7 @@ impl Orchestrator {
             running: Mutex::new(HashSet::new()),
             max_running: DEFAULT_MAX_RUNNING,
             cancelled: Mutex::new(HashMap::new()),
-            next_id: AtomicU64::new(1),
+            next_id: AtomicU64::new(last + 1),
         }
     }
 
@@ -203,9 +126,7 @@ impl Orchestrator {
 
     /// Session `id`'s state, without copying its captures.
     pub fn state(&self, id: &str) -> Result<SessionState, StageError> {
-        self.store
-            .state(id)?
-            .ok_or_else(|| StageError::NotFound(format!("session_id: no session {id:?}")))
+        Ok(self.get(id)?.state)
     }
 
     /// Takes a place for session `id` to run in, if it is not running already and a place is
@@ -318,38 +239,84 @@ impl Orchestrator {
                 }
             };
             let noise = self.noise_model(&config.candidates[config.first_view])?;
-            Some(PredictionObject::calibrated(
-                object.clone(),
-                &calibration,
-                &info,
+            let calibration = SessionCalibration {
+                part: calibration,
                 noise,
-                self.cell.surroundings.clone(),
-            )?)
+            };
+            // Refused now rather than at the first decision.
+            self.prediction_object_with(&object, &calibration, &info)?;
+            Some(calibration)
         } else {
             None
         };
-        let id = format!("s{:06}", self.next_id.fetch_add(1, Ordering::Relaxed));
+        let id = crate::store::id_of(self.next_id.fetch_add(1, Ordering::Relaxed));
         let session = Session::new(id.clone(), config)?;
-        self.store.insert(StoredSession {
+        self.store.insert(&StoredSession {
             session,
             object,
-            prediction,
+            calibration: prediction,
         })?;
-        self.cancelled
-            .lock()
-            .map_err(poisoned)?
-            .insert(id.clone(), Arc::new(AtomicBool::new(false)));
         tracing::info!(session = %id, "session created");
         Ok(id)
     }
 
-    /// The part a session refines, by name.
-    pub fn part_name(&self, id: &str) -> Option<String> {
-        self.store.get(id).ok().flatten().map(|s| s.object.name)
+    fn prediction_object_with(
+        &self,
+        object: &SessionObject,
+        calibration: &SessionCalibration,
+        info: &crate::stages::CameraInfo,
+    ) -> Result<PredictionObject, StageError> {
+        PredictionObject::calibrated(
+            object.clone(),
+            &calibration.part,
+            info,
+            calibration.noise.clone(),
+            self.cell.surroundings.clone(),
+        )
     }
 
-    /// A session with its captures and the render workers' object, for readers in the same
-    /// process (the demo's report).
+    /// The render workers' object of a stored session (entropy policies), from its
+    /// calibration, the camera's rig and the cell's surroundings.
+    pub fn prediction_object(
+        &self,
+        stored: &StoredSession,
+    ) -> Result<Option<PredictionObject>, StageError> {
+        stored
+            .calibration
+            .as_ref()
+            .map(|c| self.prediction_object_with(&stored.object, c, &self.camera.info()?))
+            .transpose()
+    }
+
+    /// Session `id`'s cancel flag, made at first use (a session kept by the store from an
+    /// earlier process has none yet).
+    fn cancel_flag(&self, id: &str) -> Result<Arc<AtomicBool>, StageError> {
+        Ok(self
+            .cancelled
+            .lock()
+            .map_err(poisoned)?
+            .entry(id.to_owned())
+            .or_default()
+            .clone())
+    }
+
+    /// `session` as a client sees it: a session the store holds as running that runs in no
+    /// thread of this process was interrupted (the orchestrator stopped while it ran).
+    fn presented(&self, mut session: Session) -> Result<Session, StageError> {
+        if session.state == SessionState::Running
+            && !self.running.lock().map_err(poisoned)?.contains(&session.id)
+        {
+            session.state = SessionState::Interrupted;
+        }
+        Ok(session)
+    }
+
+    /// The part a session refines, by name.
+    pub fn part_name(&self, id: &str) -> Option<String> {
+        self.store.part_name(id).ok().flatten()
+    }
+
+    /// A session with its captures, for readers in the same process (the demo's report).
     pub fn stored(&self, id: &str) -> Result<StoredSession, StageError> {
         self.store
             .get(id)?
@@ -358,34 +325,32 @@ impl Orchestrator {
 
     /// A session without its captures.
     pub fn get(&self, id: &str) -> Result<Session, StageError> {
-        let stored = self
+        let session = self
             .store
-            .get(id)?
+            .session(id)?
             .ok_or_else(|| StageError::NotFound(format!("session_id: no session {id:?}")))?;
-        Ok(Session {
-            views: Vec::new(),
-            ..stored.session
-        })
+        self.presented(session)
     }
 
     pub fn list(&self) -> Result<Vec<Session>, StageError> {
-        self.store.list()
+        self.store
+            .list()?
+            .into_iter()
+            .map(|s| self.presented(s))
+            .collect()
     }
 
-    /// Asks a session to stop at its next stage boundary; a session not running yet ends at
+    /// Asks a session to stop at its next stage boundary; a session not running ends at
     /// once.
     pub fn cancel(&self, id: &str) -> Result<Session, StageError> {
-        let stored = self
-            .store
-            .get(id)?
-            .ok_or_else(|| StageError::NotFound(format!("session_id: no session {id:?}")))?;
-        if let Some(flag) = self.cancelled.lock().map_err(poisoned)?.get(id) {
-            flag.store(true, Ordering::Relaxed);
-        }
-        if stored.session.state == SessionState::Created {
-            let mut session = stored.session;
-            session.state = SessionState::Cancelled;
-            self.store.update(&session)?;
+        let session = self.get(id)?;
+        self.cancel_flag(id)?.store(true, Ordering::Relaxed);
+        if matches!(
+            session.state,
+            SessionState::Created | SessionState::Interrupted
+        ) {
+            self.store
+                .set_state(id, SessionState::Cancelled, session.error.as_deref())?;
         }
         self.get(id)
     }
@@ -407,63 +372,82 @@ impl Orchestrator {
         id: &str,
         mut on_step: impl FnMut(&StepRecord),
     ) -> Result<Session, StageError> {
-        let stored = match self.store.get(id) {
-            Ok(Some(stored)) => stored,
-            Ok(None) => {
-                self.release(id);
-                return Err(StageError::NotFound(format!(
-                    "session_id: no session {id:?}"
-                )));
-            }
-            Err(e) => {
-                self.release(id);
-                return Err(e);
-            }
-        };
+        let result = self.run_stored(id, &mut on_step);
+        self.release(id);
+        result
+    }
+
+    fn run_stored(
+        &self,
+        id: &str,
+        on_step: &mut dyn FnMut(&StepRecord),
+    ) -> Result<Session, StageError> {
+        let stored = self
+            .store
+            .get(id)?
+            .ok_or_else(|| StageError::NotFound(format!("session_id: no session {id:?}")))?;
+        // A finished or resumed session shows its completed steps first.
+        for step in &stored.session.steps {
+            on_step(step);
+        }
         if stored.session.state.is_final() {
-            self.release(id);
-            for step in &stored.session.steps {
-                on_step(step);
-            }
             return self.get(id);
         }
-        let flag = self
-            .cancelled
-            .lock()
-            .map_err(poisoned)?
-            .get(id)
-            .cloned()
-            .unwrap_or_default();
+        let flag = self.cancel_flag(id)?;
+        let prediction = self.prediction_object(&stored)?;
         let StoredSession {
             mut session,
             object,
-            prediction,
+            ..
         } = stored;
+        if !session.steps.is_empty() {
+            tracing::info!(
+                session = %id,
+                steps = session.steps.len(),
+                captures = session.views.len(),
+                "resuming after the last completed step"
+            );
+        }
         let stages = Stages {
             camera: self.camera.as_ref(),
             estimation: self.estimation.as_ref(),
             prediction: prediction.as_ref().map(|p| (self.prediction.as_ref(), p)),
         };
-        let store = self.store.clone();
-        let result = crate::session::run(
-            &mut session,
-            &object,
-            &stages,
-            |step| {
-                if let Err(e) = store.record_step(id, step) {
-                    tracing::error!(session = %id, "recording step {}: {e}", step.step);
-                }
-                on_step(step);
-            },
-            || flag.load(Ordering::Relaxed),
-        );
-        self.release(id);
-        self.store.update(&session)?;
+        let mut journal = StoreJournal {
+            store: self.store.as_ref(),
+            id,
+            on_step,
+        };
+        let result =
+            crate::session::run_journaled(&mut session, &object, &stages, &mut journal, || {
+                flag.load(Ordering::Relaxed)
+            });
+        self.store
+            .set_state(id, session.state, session.error.as_deref())?;
         match result {
             Ok(()) | Err(StageError::Cancelled) => {}
             Err(e) => tracing::warn!(session = %id, "session failed: {e}"),
         }
         self.get(id)
+    }
+}
+
+/// Keeps a running session's captures and steps in the store as they come.
+struct StoreJournal<'a> {
+    store: &'a dyn SessionStore,
+    id: &'a str,
+    on_step: &'a mut dyn FnMut(&StepRecord),
+}
+
+impl Journal for StoreJournal<'_> {
+    fn captured(&mut self, step: usize, view: &CapturedView) -> Result<(), StageError> {
+        self.store.record_capture(self.id, step, view)
+    }
+
+    fn completed(&mut self, step: &StepRecord) -> Result<(), StageError> {
+        self.store.record_step(self.id, step)?;
+        (self.on_step)(step);
+        Ok(())
     }
 }
 
@@ -495,7 +479,7 @@ mod tests {
             Arc::new(LocalEstimation::default()),
             Arc::new(LocalPrediction::default()),
             Cell::unknown(),
-            Arc::new(MemoryStore::default()),
+            Arc::new(crate::store::MemoryStore::default()),
         )
         .with_max_running(2);
         orchestrator.reserve("s1").unwrap();

@@ -14,7 +14,7 @@ use crate::stages::{
 };
 
 /// How the next view is chosen.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ViewPolicy {
     /// Minimum predicted entropy with rendering-based σ̌_z (the paper's method).
@@ -69,7 +69,7 @@ impl std::str::FromStr for ViewPolicy {
 }
 
 /// Everything a session is started with.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SessionConfig {
     /// The initial pose hypothesis, object → world (the client's detector).
     pub initial_t_w_o: Isometry3<f64>,
@@ -249,7 +249,7 @@ pub fn validate(config: &SessionConfig) -> Result<(), StageError> {
 }
 
 /// Where a session is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SessionState {
     Created,
@@ -260,6 +260,10 @@ pub enum SessionState {
     BudgetSpent,
     Cancelled,
     Failed,
+    /// Held as running by the store, but the orchestrator that ran it stopped (a crash, a
+    /// restart): running it again resumes it after its last completed step. Only shown,
+    /// never stored.
+    Interrupted,
 }
 
 impl SessionState {
@@ -275,7 +279,7 @@ impl SessionState {
 }
 
 /// Time per stage of a step, milliseconds.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StageTimes {
     pub capture_ms: f64,
     pub refine_ms: f64,
@@ -284,7 +288,7 @@ pub struct StageTimes {
 }
 
 /// One completed step: a view taken and the pose refined on all views so far.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepRecord {
     pub step: usize,
     /// Index into the candidates of the view taken, and its pose.
@@ -365,20 +369,54 @@ fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
+/// What a session reports as it goes, so that a store keeps it: each capture as soon as it
+/// is taken (a resumed session refines on it instead of capturing again) and each completed
+/// step. An error stops the session: a step that cannot be kept is not taken.
+pub trait Journal {
+    /// Step `step`'s capture, before anything is computed from it.
+    fn captured(&mut self, step: usize, view: &CapturedView) -> Result<(), StageError>;
+    /// A completed step.
+    fn completed(&mut self, step: &StepRecord) -> Result<(), StageError>;
+}
+
+/// A journal that keeps nothing and shows each completed step to a closure.
+pub struct OnStep<F>(pub F);
+
+impl<F: FnMut(&StepRecord)> Journal for OnStep<F> {
+    fn captured(&mut self, _: usize, _: &CapturedView) -> Result<(), StageError> {
+        Ok(())
+    }
+    fn completed(&mut self, step: &StepRecord) -> Result<(), StageError> {
+        (self.0)(step);
+        Ok(())
+    }
+}
+
 /// Runs `session` from its last completed step to its end; `on_step` sees each step as it
 /// completes, `cancelled` is polled between stages.
 pub fn run(
     session: &mut Session,
     object: &crate::stages::SessionObject,
     stages: &Stages<'_>,
-    mut on_step: impl FnMut(&StepRecord),
+    on_step: impl FnMut(&StepRecord),
+    cancelled: impl Fn() -> bool,
+) -> Result<(), StageError> {
+    run_journaled(session, object, stages, &mut OnStep(on_step), cancelled)
+}
+
+/// [`run`], reporting each capture and step to `journal` as it happens.
+pub fn run_journaled(
+    session: &mut Session,
+    object: &crate::stages::SessionObject,
+    stages: &Stages<'_>,
+    journal: &mut dyn Journal,
     cancelled: impl Fn() -> bool,
 ) -> Result<(), StageError> {
     if session.state.is_final() {
         return Ok(());
     }
     session.state = SessionState::Running;
-    let result = run_steps(session, object, stages, &mut on_step, &cancelled);
+    let result = run_steps(session, object, stages, journal, &cancelled);
     match &result {
         Ok(()) => {}
         Err(StageError::Cancelled) => session.state = SessionState::Cancelled,
@@ -394,7 +432,7 @@ fn run_steps(
     session: &mut Session,
     object: &crate::stages::SessionObject,
     stages: &Stages<'_>,
-    on_step: &mut dyn FnMut(&StepRecord),
+    journal: &mut dyn Journal,
     cancelled: &dyn Fn() -> bool,
 ) -> Result<(), StageError> {
     let config = session.config.clone();
@@ -418,10 +456,12 @@ fn run_steps(
 
         // Capture, unless a resumed session already holds this step's capture.
         if session.views.len() <= step {
+            tracing::debug!(session = %session.id, step, view, "capturing");
             let captured = stages
                 .camera
                 .capture(&t_w_c, step_capture_seed(config.seed, step))?;
             times.capture_ms = captured.capture_ms;
+            journal.captured(step, &captured)?;
             session.views.push(captured);
         }
         check()?;
@@ -433,6 +473,7 @@ fn run_steps(
             .map_or(config.initial_t_w_o, |s| s.t_w_o);
         let views: Vec<&CapturedView> = session.views.iter().take(step + 1).collect();
         let started = Instant::now();
+        tracing::debug!(session = %session.id, step, views = views.len(), "refining");
         let refinement = stages
             .estimation
             .refine(object, &views, &hypothesis, &config.refine)?;
@@ -481,7 +522,7 @@ fn run_steps(
             session = %session.id, step, view, points = record.total_points,
             entropy_nats, "step done"
         );
-        on_step(&record);
+        journal.completed(&record)?;
         session.steps.push(record);
         if converged {
             session.state = SessionState::Converged;
@@ -539,6 +580,7 @@ fn choose_next_view(
         with_maps: false,
     };
     let started = Instant::now();
+    tracing::debug!(candidates = request.candidates.len(), step, "predicting");
     let predictions = predictor.predict(object, &request)?;
     times.predict_ms = ms_since(started);
     // The planner sees every candidate; taken ones are excluded by `taken`. Every open

@@ -39,6 +39,10 @@ pub enum StageError {
         message: String,
         retry_after_ms: u64,
     },
+    /// Kept data is damaged or missing (a session store's record or blob): nothing is
+    /// served from it.
+    #[error("data loss: {0}")]
+    DataLoss(String),
     /// Anything else.
     #[error("{0}")]
     Internal(String),
@@ -215,7 +219,7 @@ pub struct PredictionObject {
 }
 
 /// A part's photometric calibration as the render workers need it.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PartCalibration {
     /// The fitted material (`glint calibrate bsdf`).
     pub material: glint_render::bsdf::PrincipledParams<f32>,

@@ -29,7 +29,6 @@ use glint_render::bsdf::PrincipledParams;
 use glint_render::rig::SliRig;
 use nalgebra::Isometry3;
 use prost::Message;
-use sha2::{Digest, Sha256};
 use tonic::{Request, Response, Status};
 
 use crate::{
@@ -157,8 +156,7 @@ pub fn object_key(request: &v1::RegisterObjectRequest) -> String {
             pose.child_frame.clear();
         }
     }
-    let digest = Sha256::digest(canonical.encode_to_vec());
-    digest.iter().map(|b| format!("{b:02x}")).collect()
+    glint_geometry::sha256_hex(&canonical.encode_to_vec())
 }
 
 fn required<'a, T>(value: &'a Option<T>, field: &str) -> Result<&'a T, ConversionError> {

@@ -87,6 +87,7 @@ pub fn stage_error(status: &tonic::Status) -> StageError {
             StageError::Unavailable(format!("{}: {message}", status.code()))
         }
         Code::Cancelled => StageError::Cancelled,
+        Code::DataLoss => StageError::DataLoss(message),
         _ => StageError::Internal(format!("{}: {message}", status.code())),
     }
 }
@@ -107,6 +108,7 @@ pub fn status_of(error: &StageError) -> tonic::Status {
             }
             status
         }
+        StageError::DataLoss(m) => tonic::Status::data_loss(m.clone()),
         StageError::Internal(m) => tonic::Status::internal(m.clone()),
     }
 }
@@ -122,6 +124,7 @@ mod tests {
             StageError::NotFound("object abc".into()),
             StageError::FailedPrecondition("too few points".into()),
             StageError::Cancelled,
+            StageError::DataLoss("blob ab… is damaged".into()),
         ];
         for e in errors {
             assert_eq!(stage_error(&status_of(&e)), e);

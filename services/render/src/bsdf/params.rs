@@ -23,7 +23,7 @@ impl<T: DualNum<Primitive = f32> + Copy> BsdfScalar for T {}
 ///
 /// `PrincipledParams<f32>` is the everyday type; [`PrincipledParams::map`] lifts it to dual
 /// numbers for differentiation.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PrincipledParams<T> {
     /// Diffuse albedo and metallic F0 (grey reflectance).
     pub base_color: T,

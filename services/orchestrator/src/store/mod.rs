@@ -1,0 +1,89 @@
+//! Where an orchestrator keeps its sessions: [`SessionStore`], with [`MemoryStore`] (lost
+//! when the process ends) and [`DiskStore`] (a redb database of session records beside a
+//! content-addressed blob directory of captures and meshes, which survives a crash).
+//!
+//! A session reaches its store as it runs: each capture as soon as it is taken, each step as
+//! it completes, its final state at the end. A session interrupted by a crash therefore
+//! resumes from its last completed step and refines on the captures it already has.
+
+pub mod blobs;
+pub mod capture_file;
+mod disk;
+mod memory;
+
+pub use disk::{DiskStore, StoreError};
+pub use memory::MemoryStore;
+
+use glint_estimation::depth_sigma::NoiseModel;
+
+use crate::session::{Session, SessionState, StepRecord};
+use crate::stages::{CapturedView, PartCalibration, SessionObject, StageError};
+
+/// What the render workers' object of a session is built from (entropy policies only): the
+/// part's calibration and the sensor's noise as fitted when the session started. The rest —
+/// the camera's rig, exposure and shots, the cell's surroundings — is the orchestrator's.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SessionCalibration {
+    pub part: PartCalibration,
+    pub noise: NoiseModel,
+}
+
+/// A session as the store keeps it: its state machine with its captures, its part, and what
+/// its predictions need.
+#[derive(Clone, Debug)]
+pub struct StoredSession {
+    pub session: Session,
+    pub object: SessionObject,
+    pub calibration: Option<SessionCalibration>,
+}
+
+/// Where sessions live. Every write is complete or absent: a crash between two calls loses
+/// nothing that an earlier call returned `Ok` for.
+pub trait SessionStore: Send + Sync {
+    /// Adds a new session (no steps, no captures yet).
+    fn insert(&self, session: &StoredSession) -> Result<(), StageError>;
+    /// A session with its captures, to run it or to write its report; `None` for an
+    /// unknown id.
+    fn get(&self, id: &str) -> Result<Option<StoredSession>, StageError>;
+    /// A session without its captures (`views` empty).
+    fn session(&self, id: &str) -> Result<Option<Session>, StageError>;
+    /// Every session without its captures, oldest first.
+    fn list(&self) -> Result<Vec<Session>, StageError>;
+    /// The name of a session's part.
+    fn part_name(&self, id: &str) -> Result<Option<String>, StageError>;
+    /// Keeps step `step`'s capture (replacing one kept for that step before).
+    fn record_capture(&self, id: &str, step: usize, view: &CapturedView) -> Result<(), StageError>;
+    /// Keeps a completed step, which must be the session's next (a step is never kept
+    /// twice); the session is then running.
+    fn record_step(&self, id: &str, step: &StepRecord) -> Result<(), StageError>;
+    /// Sets a session's state and error (after a run, a cancel).
+    fn set_state(
+        &self,
+        id: &str,
+        state: SessionState,
+        error: Option<&str>,
+    ) -> Result<(), StageError>;
+}
+
+/// The number in an orchestrator's session id (`s000042` → 42).
+pub fn id_number(id: &str) -> Option<u64> {
+    id.strip_prefix('s')?.parse().ok()
+}
+
+/// The id of session number `n`.
+pub fn id_of(n: u64) -> String {
+    format!("s{n:06}")
+}
+
+/// The error of a step kept out of order.
+fn out_of_order(id: &str, kept: usize, step: usize) -> StageError {
+    StageError::Internal(format!(
+        "session {id}: step {step} recorded after {kept} steps; steps are kept once, in order"
+    ))
+}
+
+fn capture_out_of_order(id: &str, kept: usize, step: usize) -> StageError {
+    StageError::Internal(format!(
+        "session {id}: the capture of step {step} recorded after {kept} captures"
+    ))
+}
