@@ -5,7 +5,8 @@
 
 use anyhow::Context;
 use glint_client::{
-    MockSession, channel, run_mock_session, state_name, status, table_header, table_row,
+    MockSession, channel, run_mock_session, state_name, status, stream_session, table_header,
+    table_row,
 };
 use glint_geometry::Part;
 use glint_orchestrator::session::ViewPolicy;
@@ -185,27 +186,15 @@ pub fn run(args: &SessionArgs) -> anyhow::Result<()> {
             }
             SessionCommand::Resume { id } => {
                 let mut client = OrchestratorServiceClient::new(channel(&args.orchestrator, &security).await?);
-                let mut stream = client
-                    .run_session(v1::RunSessionRequest {
-                        session_id: id.clone(),
-                    })
-                    .await
-                    .map_err(status)?
-                    .into_inner();
                 println!("{}", table_header());
-                while let Some(event) = stream.message().await.map_err(status)? {
-                    match event.event {
-                        Some(v1::session_event::Event::Step(step)) => {
-                            println!("{}", table_row(&step, None));
-                        }
-                        Some(v1::session_event::Event::Finished(s)) => {
-                            println!("{}", session_line(&s));
-                            if !s.error.is_empty() {
-                                anyhow::bail!("the session failed: {}", s.error);
-                            }
-                        }
-                        None => {}
-                    }
+                let s = stream_session(&mut client, id, |step| {
+                    println!("{}", table_row(step, None));
+                    Ok(())
+                })
+                .await?;
+                println!("{}", session_line(&s));
+                if !s.error.is_empty() {
+                    anyhow::bail!("the session failed: {}", s.error);
                 }
             }
             SessionCommand::Cancel { id } => {

@@ -278,35 +278,48 @@ pub async fn run_prepared_session(
         .session_id;
     on_row(&format!("Session {id}, policy {policy}."), None);
     on_row(&table_header(), None);
-    let mut stream = client
-        .run_session(v1::RunSessionRequest {
-            session_id: id.clone(),
-        })
-        .await
-        .map_err(status)?
-        .into_inner();
     let mut steps = Vec::new();
     let mut deviations = Vec::new();
-    let mut finished = None;
-    while let Some(event) = stream.message().await.map_err(status)? {
-        match event.event {
-            Some(v1::session_event::Event::Step(step)) => {
-                let d = prepared.deviation(&pose(&step.t_w_o, "step pose")?);
-                on_row(&table_row(&step, Some(&d)), Some(&step));
-                deviations.push(d);
-                steps.push(step);
-            }
-            Some(v1::session_event::Event::Finished(session)) => finished = Some(session),
-            None => {}
-        }
-    }
-    let session = finished.context("the session's stream ended without its final state")?;
+    let session = stream_session(&mut client, &id, |step| {
+        let d = prepared.deviation(&pose(&step.t_w_o, "step pose")?);
+        on_row(&table_row(step, Some(&d)), Some(step));
+        deviations.push(d);
+        steps.push(step.clone());
+        Ok(())
+    })
+    .await?;
     Ok(RunOutcome {
         steps,
         session,
         deviations,
         initial_deviation: prepared.initial_deviation,
     })
+}
+
+/// Runs session `id` (RunSession: a created session starts, an interrupted one resumes after
+/// its completed steps, which come first) and hands each step to `on_step` as it streams;
+/// returns the session's final state.
+pub async fn stream_session(
+    client: &mut OrchestratorServiceClient<AuthChannel>,
+    id: &str,
+    mut on_step: impl FnMut(&v1::SessionStep) -> anyhow::Result<()>,
+) -> anyhow::Result<v1::Session> {
+    let mut stream = client
+        .run_session(v1::RunSessionRequest {
+            session_id: id.to_owned(),
+        })
+        .await
+        .map_err(status)?
+        .into_inner();
+    let mut finished = None;
+    while let Some(event) = stream.message().await.map_err(status)? {
+        match event.event {
+            Some(v1::session_event::Event::Step(step)) => on_step(&step)?,
+            Some(v1::session_event::Event::Finished(session)) => finished = Some(session),
+            None => {}
+        }
+    }
+    finished.context("the session's stream ended without its final state")
 }
 
 /// Sets up the mock bin on `camera`, asks the stand-in detector, runs a session on

@@ -48,6 +48,10 @@ pub struct LoadBenchArgs {
     /// Give up (and fail) after this many seconds: a deadlock or an unbounded queue shows here.
     #[arg(long, default_value_t = 900.0)]
     pub timeout_s: f64,
+    /// The started server keeps its sessions here (`glint serve all --state DIR`) instead of
+    /// in memory (ignored with --orchestrator).
+    #[arg(long, value_name = "DIR")]
+    pub state: Option<std::path::PathBuf>,
     /// Instead of starting `glint serve all`: this orchestrator (its mock camera at --camera).
     #[arg(long)]
     pub orchestrator: Option<String>,
@@ -165,6 +169,13 @@ pub fn run(args: &LoadBenchArgs) -> anyhow::Result<()> {
                 .map(|p| p.to_string_lossy().into_owned());
             if let Some(t) = &token {
                 flags.extend(["--token-file", t]);
+            }
+            let state = args
+                .state
+                .as_ref()
+                .map(|p| p.to_string_lossy().into_owned());
+            if let Some(dir) = &state {
+                flags.extend(["--state", dir]);
             }
             let server = ServerProcess::spawn(&program, &flags)?;
             let addr = server.addr.clone();

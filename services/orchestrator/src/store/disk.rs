@@ -16,8 +16,7 @@ use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition};
 
 use super::blobs::{BlobDir, BlobError};
 use super::{
-    SessionCalibration, SessionStore, StoredSession, capture_file, capture_out_of_order,
-    out_of_order,
+    SessionCalibration, SessionStore, StoredSession, capture_file, out_of_order, place_capture,
 };
 use crate::session::{Session, SessionConfig, SessionState, StepRecord};
 use crate::stages::{CapturedView, SessionObject, StageError};
@@ -375,14 +374,7 @@ impl SessionStore for DiskStore {
         let bytes = capture_file::to_bytes(view).map_err(store_error)?;
         let blob = self.blobs.put(&bytes).map_err(store_error)?;
         self.change(id, |record| {
-            match step.cmp(&record.captures.len()) {
-                std::cmp::Ordering::Less => record.captures[step] = blob,
-                std::cmp::Ordering::Equal => record.captures.push(blob),
-                std::cmp::Ordering::Greater => {
-                    return Err(capture_out_of_order(id, record.captures.len(), step));
-                }
-            }
-            Ok(())
+            place_capture(id, &mut record.captures, step, blob)
         })
     }
 

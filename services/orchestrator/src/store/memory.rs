@@ -3,7 +3,7 @@
 use std::collections::HashMap;
 use std::sync::Mutex;
 
-use super::{SessionStore, StoredSession, capture_out_of_order, out_of_order};
+use super::{SessionStore, StoredSession, out_of_order, place_capture};
 use crate::session::{Session, SessionState, StepRecord};
 use crate::stages::{CapturedView, StageError};
 
@@ -94,15 +94,7 @@ impl SessionStore for MemoryStore {
 
     fn record_capture(&self, id: &str, step: usize, view: &CapturedView) -> Result<(), StageError> {
         self.with(id, |stored| {
-            let views = &mut stored.session.views;
-            match step.cmp(&views.len()) {
-                std::cmp::Ordering::Less => views[step] = view.clone(),
-                std::cmp::Ordering::Equal => views.push(view.clone()),
-                std::cmp::Ordering::Greater => {
-                    return Err(capture_out_of_order(id, views.len(), step));
-                }
-            }
-            Ok(())
+            place_capture(id, &mut stored.session.views, step, view.clone())
         })
     }
 

@@ -82,8 +82,23 @@ fn out_of_order(id: &str, kept: usize, step: usize) -> StageError {
     ))
 }
 
-fn capture_out_of_order(id: &str, kept: usize, step: usize) -> StageError {
-    StageError::Internal(format!(
-        "session {id}: the capture of step {step} recorded after {kept} captures"
-    ))
+/// Puts step `step`'s capture `item` into a session's `captures`: replaces a kept one, or
+/// appends the next; a capture beyond the next is an error.
+fn place_capture<T>(
+    id: &str,
+    captures: &mut Vec<T>,
+    step: usize,
+    item: T,
+) -> Result<(), StageError> {
+    match step.cmp(&captures.len()) {
+        std::cmp::Ordering::Less => captures[step] = item,
+        std::cmp::Ordering::Equal => captures.push(item),
+        std::cmp::Ordering::Greater => {
+            return Err(StageError::Internal(format!(
+                "session {id}: the capture of step {step} recorded after {} captures",
+                captures.len()
+            )));
+        }
+    }
+    Ok(())
 }
