@@ -182,18 +182,18 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
             outcome.steps.len(),
             error_summary(&outcome)
         );
-        let stored = server
-            .orchestrator
-            .stored(&outcome.session.session_id)
-            .map_err(anyhow::Error::msg)?;
-        let object = server
-            .orchestrator
-            .prediction_object(&stored)
-            .map_err(anyhow::Error::msg)?;
         let orchestrator = server.orchestrator.clone();
         let out = out.clone();
         let error = outcome_error(&outcome).map(str::to_owned);
+        // The store's reads and the render workers' object (it asks the camera for its rig
+        // over gRPC, a blocking call) belong on a blocking thread, as the report does.
         let report = tokio::task::spawn_blocking(move || {
+            let stored = orchestrator
+                .stored(&outcome.session.session_id)
+                .map_err(anyhow::Error::msg)?;
+            let object = orchestrator
+                .prediction_object(&stored)
+                .map_err(anyhow::Error::msg)?;
             write_report(
                 &out,
                 &stored,

@@ -348,3 +348,41 @@ fn sessions_beyond_the_orchestrators_limit_wait_their_turn_and_all_complete() {
         "6 sessions on 2 places must see refusals: {said}"
     );
 }
+
+#[test]
+fn the_demo_runs_a_session_through_its_servers_and_writes_its_report() {
+    let out = tempfile::tempdir().unwrap();
+    let dir = out.path().join("report");
+    let run = common::glint(&[
+        "demo",
+        "--out",
+        dir.to_str().unwrap(),
+        "--resolution",
+        "320x256",
+        "--spp",
+        "1",
+        "--max-views",
+        "2",
+        "--candidates",
+        "6",
+        "--instances",
+        "3",
+    ]);
+    let said = common::printed(&run);
+    assert!(run.status.success(), "{said}");
+    assert!(said.contains("Report:"), "{said}");
+    for file in ["index.html", "session.png", "steps.txt"] {
+        assert!(dir.join(file).is_file(), "{file} missing: {said}");
+    }
+    // The NBV policy's report shows the σ̌_z map predicted for the view chosen after step 0.
+    let maps = std::fs::read_dir(dir.join("captures"))
+        .unwrap()
+        .filter_map(Result::ok)
+        .filter(|e| {
+            e.file_name()
+                .to_string_lossy()
+                .starts_with("step00_next_view_sigma")
+        })
+        .count();
+    assert!(maps >= 1, "no predicted map in the report: {said}");
+}
