@@ -478,7 +478,6 @@ mod tests {
                 // The rest end the session FAILED with the reason; step 0 is kept.
                 CameraFault::EmptyCapture | CameraFault::Timeout => {
                     let error = result.unwrap_err().to_string();
-                    eprintln!("{fault:?}: {error}");
                     assert_eq!(session.state, SessionState::Failed, "{fault:?}");
                     assert_eq!(session.steps.len(), 1, "{fault:?}");
                     assert_eq!(session.error.as_deref(), Some(error.as_str()));

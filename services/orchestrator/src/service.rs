@@ -209,7 +209,7 @@ impl Orchestrator {
             const_sigma_z_m: CONST_SIGMA_Z_M,
         };
         crate::session::validate(&config)?;
-        let prediction = if config.policy.prediction(CONST_SIGMA_Z_M).is_some() {
+        let session_calibration = if config.policy.prediction(CONST_SIGMA_Z_M).is_some() {
             let calibration = match request.calibration {
                 Some(c) => c,
                 None => {
@@ -254,7 +254,7 @@ impl Orchestrator {
         self.store.insert(&StoredSession {
             session,
             object,
-            calibration: prediction,
+            calibration: session_calibration,
         })?;
         tracing::info!(session = %id, "session created");
         Ok(id)
@@ -382,17 +382,22 @@ impl Orchestrator {
         id: &str,
         on_step: &mut dyn FnMut(&StepRecord),
     ) -> Result<Session, StageError> {
+        // A finished or resumed session shows its completed steps first; a finished one
+        // needs nothing more (its captures stay where they are).
+        let kept = self
+            .store
+            .session(id)?
+            .ok_or_else(|| StageError::NotFound(format!("session_id: no session {id:?}")))?;
+        for step in &kept.steps {
+            on_step(step);
+        }
+        if kept.state.is_final() {
+            return self.presented(kept);
+        }
         let stored = self
             .store
             .get(id)?
             .ok_or_else(|| StageError::NotFound(format!("session_id: no session {id:?}")))?;
-        // A finished or resumed session shows its completed steps first.
-        for step in &stored.session.steps {
-            on_step(step);
-        }
-        if stored.session.state.is_final() {
-            return self.get(id);
-        }
         let flag = self.cancel_flag(id)?;
         let prediction = self.prediction_object(&stored)?;
         let StoredSession {

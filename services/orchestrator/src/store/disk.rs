@@ -16,7 +16,8 @@ use redb::{Database, ReadableDatabase, ReadableTable, TableDefinition};
 
 use super::blobs::{BlobDir, BlobError};
 use super::{
-    SessionCalibration, SessionStore, StoredSession, capture_file, out_of_order, place_capture,
+    SessionCalibration, SessionStore, StoredSession, append_step, capture_file, check_new,
+    place_capture,
 };
 use crate::session::{Session, SessionConfig, SessionState, StepRecord};
 use crate::stages::{CapturedView, SessionObject, StageError};
@@ -82,7 +83,6 @@ pub enum StoreError {
 /// Sessions kept in a state directory; they survive a crash of the process.
 pub struct DiskStore {
     db: Database,
-    db_path: PathBuf,
     blobs: BlobDir,
     /// The records as committed, ids oldest first.
     records: Mutex<(Vec<String>, HashMap<String, SessionRecord>)>,
@@ -208,16 +208,10 @@ impl DiskStore {
         );
         Ok(Self {
             db,
-            db_path,
             blobs,
             records: Mutex::new((order, records)),
             meshes: Mutex::new(HashMap::new()),
         })
-    }
-
-    /// The database file.
-    pub fn db_path(&self) -> &Path {
-        &self.db_path
     }
 
     /// Commits `record` and then caches it; under the records' lock, so writes are in order.
@@ -274,6 +268,7 @@ impl DiskStore {
 
 impl SessionStore for DiskStore {
     fn insert(&self, stored: &StoredSession) -> Result<(), StageError> {
+        check_new(stored)?;
         let mesh_blob = self
             .blobs
             .put(&stored.object.mesh.canonical_bytes())
@@ -285,11 +280,6 @@ impl SessionStore for DiskStore {
             )));
         }
         let session = &stored.session;
-        let mut captures = Vec::with_capacity(session.views.len());
-        for view in &session.views {
-            let bytes = capture_file::to_bytes(view).map_err(store_error)?;
-            captures.push(self.blobs.put(&bytes).map_err(store_error)?);
-        }
         let record = SessionRecord {
             format: FORMAT,
             id: session.id.clone(),
@@ -299,8 +289,8 @@ impl SessionStore for DiskStore {
             calibration: stored.calibration.clone(),
             state: session.state,
             error: session.error.clone(),
-            steps: session.steps.clone(),
-            captures,
+            steps: Vec::new(),
+            captures: Vec::new(),
         };
         let mut guard = self.records.lock().map_err(poisoned)?;
         if guard.1.contains_key(&record.id) {
@@ -380,12 +370,7 @@ impl SessionStore for DiskStore {
 
     fn record_step(&self, id: &str, step: &StepRecord) -> Result<(), StageError> {
         self.change(id, |record| {
-            if step.step != record.steps.len() {
-                return Err(out_of_order(id, record.steps.len(), step.step));
-            }
-            record.state = SessionState::Running;
-            record.steps.push(step.clone());
-            Ok(())
+            append_step(id, &mut record.steps, &mut record.state, step)
         })
     }
 

@@ -3,7 +3,7 @@
 use std::collections::HashMap;
 use std::sync::Mutex;
 
-use super::{SessionStore, StoredSession, out_of_order, place_capture};
+use super::{SessionStore, StoredSession, append_step, check_new, place_capture};
 use crate::session::{Session, SessionState, StepRecord};
 use crate::stages::{CapturedView, StageError};
 
@@ -47,6 +47,7 @@ pub(super) fn without_views(session: &Session) -> Session {
 
 impl SessionStore for MemoryStore {
     fn insert(&self, session: &StoredSession) -> Result<(), StageError> {
+        check_new(session)?;
         let mut guard = self.sessions.lock().map_err(poisoned)?;
         let (order, map) = &mut *guard;
         let id = session.session.id.clone();
@@ -101,12 +102,7 @@ impl SessionStore for MemoryStore {
     fn record_step(&self, id: &str, step: &StepRecord) -> Result<(), StageError> {
         self.with(id, |stored| {
             let session = &mut stored.session;
-            if step.step != session.steps.len() {
-                return Err(out_of_order(id, session.steps.len(), step.step));
-            }
-            session.state = SessionState::Running;
-            session.steps.push(step.clone());
-            Ok(())
+            append_step(id, &mut session.steps, &mut session.state, step)
         })
     }
 

@@ -40,7 +40,7 @@ pub struct StoredSession {
 /// Where sessions live. Every write is complete or absent: a crash between two calls loses
 /// nothing that an earlier call returned `Ok` for.
 pub trait SessionStore: Send + Sync {
-    /// Adds a new session (no steps, no captures yet).
+    /// Adds a new session (no steps, no captures yet: anything else is refused).
     fn insert(&self, session: &StoredSession) -> Result<(), StageError>;
     /// A session with its captures, to run it or to write its report; `None` for an
     /// unknown id.
@@ -75,11 +75,41 @@ pub fn id_of(n: u64) -> String {
     format!("s{n:06}")
 }
 
-/// The error of a step kept out of order.
-fn out_of_order(id: &str, kept: usize, step: usize) -> StageError {
-    StageError::Internal(format!(
-        "session {id}: step {step} recorded after {kept} steps; steps are kept once, in order"
-    ))
+/// Appends a completed step to a session's `steps`, which must be its next (a step is kept
+/// once, in order); the session is then running.
+fn append_step(
+    id: &str,
+    steps: &mut Vec<StepRecord>,
+    state: &mut SessionState,
+    step: &StepRecord,
+) -> Result<(), StageError> {
+    if step.step != steps.len() {
+        return Err(StageError::Internal(format!(
+            "session {id}: step {} recorded after {} steps; steps are kept once, in order",
+            step.step,
+            steps.len()
+        )));
+    }
+    *state = SessionState::Running;
+    steps.push(step.clone());
+    Ok(())
+}
+
+/// A session [`SessionStore::insert`] takes: new, without steps or captures (those come
+/// through `record_step` and `record_capture`, so that nothing given is silently not kept).
+fn check_new(stored: &StoredSession) -> Result<(), StageError> {
+    let session = &stored.session;
+    if session.steps.is_empty() && session.views.is_empty() {
+        Ok(())
+    } else {
+        Err(StageError::Internal(format!(
+            "session {}: insert takes a new session; its {} steps and {} captures go through \
+             record_step and record_capture",
+            session.id,
+            session.steps.len(),
+            session.views.len()
+        )))
+    }
 }
 
 /// Puts step `step`'s capture `item` into a session's `captures`: replaces a kept one, or
