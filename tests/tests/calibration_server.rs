@@ -9,8 +9,8 @@ use glint_calibration::response::{DebevecConfig, ExposureStack, calibrate};
 use glint_calibration::server::{Calibration, SERVICE_NAME, response_to_message};
 use glint_camera::materials;
 use glint_camera::setup::{BinSetup, BinSetupSpec};
+use glint_client::calibration::exposure_stack_messages;
 use glint_geometry::Part;
-use glint_proto::chunks::{OutgoingArray, chunks};
 use glint_proto::v1;
 use glint_proto::v1::calibration_service_client::CalibrationServiceClient;
 use glint_server::HealthStatus;
@@ -41,31 +41,12 @@ fn mock_stack() -> glint_camera::exposure::ExposureStack {
         .0
 }
 
+/// The stack as `CalibrateResponse`'s stream, with `bit_depth` in its header.
 fn stream_of(
     stack: &glint_camera::exposure::ExposureStack,
     bit_depth: u32,
 ) -> Vec<v1::ExposureStackChunk> {
-    use v1::exposure_stack_chunk::Part;
-    let arrays: Vec<OutgoingArray> = stack
-        .left
-        .iter()
-        .enumerate()
-        .map(|(i, img)| OutgoingArray::image(&format!("exposure_{i:03}"), v1::Image::from(img)))
-        .collect();
-    let header = v1::ExposureStackHeader {
-        exposures_s: stack.exposures_s.clone(),
-        arrays: arrays.iter().map(|a| a.header.clone()).collect(),
-        bit_depth,
-        lambda: 0.0,
-        samples: 0,
-    };
-    std::iter::once(v1::ExposureStackChunk {
-        part: Some(Part::Header(header)),
-    })
-    .chain(chunks(&arrays).map(|c| v1::ExposureStackChunk {
-        part: Some(Part::Chunk(c)),
-    }))
-    .collect()
+    exposure_stack_messages(&stack.left, &stack.exposures_s, bit_depth)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -5,24 +5,18 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use glint_calibration::material_file::GroundTruthMaterials;
-use glint_camera::capture::{
-    CaptureTruth, DepthQuality, MockSliCamera, StereoCapture, depth_quality,
-};
-use glint_camera::dataset::bop::{BopCamera, BopSceneWriter, write_dataset_camera, write_models};
-use glint_camera::dataset::reference_file::{ReferenceSurface, write_reference_surface_json};
-use glint_camera::dataset::rig_file::{write_gt_sensor_json, write_rig_json};
-use glint_camera::dataset::{write_exposure_stack, write_png_u8};
+use glint_camera::capture::{CaptureTruth, DepthQuality, StereoCapture, depth_quality};
+use glint_camera::dataset::write_png_u8;
 use glint_camera::edge_errors::{EdgeBin, errors_by_edge_distance};
 use glint_camera::effects::missing_causes;
 use glint_camera::materials;
-use glint_camera::record::{to_8bit, write_bop_annotations, write_bop_image};
+use glint_camera::record::{to_8bit, write_bop_image};
 use glint_camera::setup::{BinSetup, BinSetupSpec, capture_seed};
+use glint_eval::capture_folder::{PART_OBJ_ID, record_exposure_stacks, start_capture_folder};
 use glint_geometry::image::Image;
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::parts::Part;
 use image::ImageEncoder;
-use nalgebra::Isometry3;
 
 #[derive(clap::Args)]
 pub struct CaptureArgs {
@@ -123,15 +117,28 @@ pub(crate) fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
 }
 
 pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
     let mesh = args.part.mesh();
     let shiny = BinSetup::new(&mesh, materials::ground_truth(args.part), &args.bin.spec())?;
+    let views = shiny.views(args.views as usize);
+    if let Some(ExposureTimes(exposures_s)) = &args.exposure_stack {
+        let bar = glint_eval::progress::bar(views.len() as u64, "exposure stacks");
+        let recorded = record_exposure_stacks(
+            &args.out,
+            args.part,
+            &shiny,
+            args.bin.seed,
+            &views,
+            exposures_s,
+            || bar.inc(1),
+        )?;
+        bar.finish_and_clear();
+        println!("{}\nwrote {}", recorded.report, args.out.display());
+        return Ok(());
+    }
     let matte = shiny.repainted(&mesh, materials::diffuse_twin())?;
-    let (rig, bin, poses) = (shiny.rig, shiny.bin, &shiny.poses);
+    let (rig, poses) = (shiny.rig, &shiny.poses);
     let radius = shiny.config.matcher.window_radius_px;
     let cameras = [("shiny", shiny.camera()), ("diffuse twin", matte.camera())];
-    let views = shiny.views(args.views as usize);
 
     let mut report = format!(
         "# glint capture: {} × {}, {} views, seed {}, {}×{} px, {} spp multi-path\n\n\
@@ -149,46 +156,7 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
         args.bin.spp
     );
     // BOP layout: models/ (mm) and one scene, test/000001/, one image per view.
-    const OBJ_ID: u32 = 1;
-    let part_mesh = args.part.mesh();
-    write_models(
-        &args.out.join("models"),
-        &[(OBJ_ID, &part_mesh, &args.part.symmetry())],
-    )?;
-    let mut bop = BopSceneWriter::create(
-        args.out.join("test").join("000001"),
-        BopSceneWriter::DEFAULT_DEPTH_SCALE_MM,
-    )?;
-    bop.set_gt_materials(serde_json::to_value(GroundTruthMaterials::new(
-        args.part.name(),
-        materials::ground_truth(args.part),
-        materials::bin(),
-    ))?);
-    // The rig as known hardware (calibration reads it) and the GT sensor (evaluation only).
-    let layout = bop.layout().clone();
-    std::fs::create_dir_all(layout.glint_dir())
-        .with_context(|| format!("creating {}", layout.glint_dir().display()))?;
-    write_rig_json(&layout.rig_json(), &rig)?;
-    // The bin as known equipment: the BSDF calibration's radiometric reference.
-    write_reference_surface_json(
-        &layout.reference_surface_json(),
-        &ReferenceSurface {
-            bin,
-            material: materials::bin(),
-        },
-    )?;
-    write_gt_sensor_json(&layout.gt_sensor_json(), &cameras[0].1.config.sensor)?;
-    write_dataset_camera(
-        &args.out.join("camera.json"),
-        &BopCamera {
-            intrinsics: rig.stereo.intrinsics,
-            depth_scale_mm: Some(bop.depth_scale_mm()),
-            t_c_w: None,
-        },
-    )?;
-    if let Some(ExposureTimes(exposures_s)) = &args.exposure_stack {
-        return run_exposure_stacks(args, &cameras[0].1, &views, poses, OBJ_ID, bop, exposures_s);
-    }
+    let mut bop = start_capture_folder(&args.out, args.part, &shiny)?;
     let bar = glint_eval::progress::bar(views.len() as u64, "capture");
     let mut totals: [Vec<DepthQuality>; 2] = Default::default();
     let mut cause_totals = [0usize; 4];
@@ -232,7 +200,7 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
             &captures[0],
             &cameras[0].1,
             poses,
-            OBJ_ID,
+            PART_OBJ_ID,
         )?;
         for (totals, (capture, truth)) in edge_totals.iter_mut().zip(captures.iter().zip(&truths)) {
             let bins = errors_by_edge_distance(capture, truth, &part_labels, &EDGE_BIN_BOUNDS_PX);
@@ -390,86 +358,6 @@ fn write_depth(path: &Path, capture: &StereoCapture, truth: &CaptureTruth) -> an
         image::ExtendedColorType::Rgb8,
     )?;
     write_file_atomically(path, &png).with_context(|| format!("writing {}", path.display()))
-}
-
-/// Fraction of full scale below which an exposure-stack pixel counts as under-exposed.
-const UNDER_EXPOSED_FRACTION: f64 = 0.02;
-
-/// `glint capture --exposure-stack`: per view, a white-pattern exposure stack of the left
-/// camera in `glint/exposure_stack/XXXXXX/`, with the view's camera, GT poses and masks.
-fn run_exposure_stacks(
-    args: &CaptureArgs,
-    camera: &MockSliCamera<'_>,
-    views: &[Isometry3<f64>],
-    poses: &[Isometry3<f64>],
-    obj_id: u32,
-    mut bop: BopSceneWriter,
-    exposures_s: &[f64],
-) -> anyhow::Result<()> {
-    let max_dn = camera.config.sensor.max_dn();
-    let under_dn = (UNDER_EXPOSED_FRACTION * max_dn as f64).ceil() as u16;
-    let ms: Vec<String> = exposures_s.iter().map(|t| format!("{}", t * 1e3)).collect();
-    let mut report = format!(
-        "# glint capture --exposure-stack: {} × {}, {} views, seed {}, {}×{} px, {} spp multi-path, white pattern\n\n\
-         Exposure times (ms): {}. Per view and exposure, over the pixels where a part is visible: the share \
-         under-exposed (below {:.0} % of full scale, DN < {under_dn}) and saturated (DN = {max_dn}).\n\n\
-         | view | exposure (ms) | part pixels | under-exposed | saturated |\n|---:|---:|---:|---:|---:|\n",
-        args.part.display_name(),
-        args.bin.instances,
-        args.views,
-        args.bin.seed,
-        args.bin.resolution.0,
-        args.bin.resolution.1,
-        args.bin.spp,
-        ms.join(", "),
-        UNDER_EXPOSED_FRACTION * 100.0,
-    );
-    let bar = glint_eval::progress::bar(views.len() as u64, "exposure stacks");
-    for (k, t_w_c) in views.iter().enumerate() {
-        let seed = capture_seed(args.bin.seed, k);
-        let (stack, truth) = camera.capture_exposure_stack(t_w_c, exposures_s, seed)?;
-        let dir = bop.layout().exposure_stack_dir(k as u32);
-        write_exposure_stack(&dir, &stack)?;
-        // Ground truth beside the stack, for evaluating a calibration only.
-        glint_render::exr_io::write_exr(
-            &dir.join("gt_left_radiance.exr"),
-            &[("gt_left_radiance", &truth.left_radiance)],
-        )?;
-        let seen = write_bop_annotations(&mut bop, k as u32, t_w_c, camera, poses, obj_id, None)?;
-        let on_part: Vec<usize> = (0..truth.left_radiance.data().len())
-            .filter(|&i| seen.iter().any(|v| v.mask_visib.data()[i] != 0))
-            .collect();
-        for (image, dt) in stack.left.iter().zip(&stack.exposures_s) {
-            let n = on_part.len().max(1) as f64;
-            let under = on_part
-                .iter()
-                .filter(|&&i| image.data()[i] < under_dn)
-                .count();
-            let saturated = on_part
-                .iter()
-                .filter(|&&i| image.data()[i] >= max_dn)
-                .count();
-            report += &format!(
-                "| {k} | {} | {} | {:.3} | {:.3} |\n",
-                dt * 1e3,
-                on_part.len(),
-                under as f64 / n,
-                saturated as f64 / n
-            );
-        }
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
-    report += "\nFiles: `test/000001/glint/exposure_stack/XXXXXX/stack.json` with `dt_NNN.png` (the sensor's digital numbers), \
-               `gt_left_radiance.exr` beside it and `glint/gt_sensor.json` (ground truth, evaluation only), `glint/rig.json` (the rig as known hardware), \
-               `glint/reference_surface.json` (the bin and its known reflectance, the BSDF fit's radiometric reference), \
-               and the BOP files of each view (scene_camera, scene_gt, scene_gt_info, mask, mask_visib).\n";
-    bop.finish()?;
-    let path = args.out.join("report.md");
-    write_file_atomically(&path, report.as_bytes())
-        .with_context(|| format!("writing {}", path.display()))?;
-    println!("{report}\nwrote {}", args.out.display());
-    Ok(())
 }
 
 /// The view's float images as one EXR.

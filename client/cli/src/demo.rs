@@ -22,7 +22,12 @@ use glint_orchestrator::stages::{
 use glint_orchestrator::store::StoredSession;
 
 use crate::serve_cmd::{AllArgs, CameraArgs, FanOutArgs, InProcessServer};
+use glint_client::calibration::{
+    CALIBRATION_EXPOSURES_S, CALIBRATION_VIEWS, CalibrationCache, CalibrationEvent,
+    MockCalibrationSpec, calibrate_mock_part,
+};
 use glint_client::{MockSession, RunOutcome, run_mock_session, table_header};
+use glint_eval::active::Calibration;
 
 pub const DEFAULT_OUT: &str = "glint-out";
 
@@ -37,9 +42,20 @@ pub struct DemoArgs {
     /// How the next view is chosen: nbv, nbv-const-sigma, random, max-distance.
     #[arg(long, default_value = "nbv")]
     pub policy: ViewPolicy,
-    /// The calibration the entropy policies' render workers use.
-    #[command(flatten)]
-    pub calibration: crate::calibration_args::CalibrationArgs,
+    /// The part's fitted material (`glint calibrate bsdf`) for the render workers. Without
+    /// --material and --response the demo calibrates the part through its calibration service
+    /// once and caches the result in OUT/calibration/PART/.
+    #[arg(long, requires = "response")]
+    pub material: Option<PathBuf>,
+    /// The camera response (`glint calibrate response`) that goes with --material.
+    #[arg(long, requires = "material")]
+    pub response: Option<PathBuf>,
+    /// Samples per pixel of the first calibration's capture (2 views × 11 exposures).
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub calibration_spp: u32,
+    /// Adam iterations of the first calibration's BSDF fit.
+    #[arg(long, default_value_t = 300, value_parser = clap::value_parser!(u32).range(1..=10000))]
+    pub calibration_iterations: u32,
     /// Views at most (the first included).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub max_views: u32,
@@ -88,14 +104,10 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     );
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    // The calibration first: a bad file fails before anything starts.
-    let calibration = if args.policy.prediction(0.0).is_some() {
-        Some(
-            PartCalibration::from_files(&args.calibration.load(args.part)?)
-                .map_err(|e| anyhow::anyhow!("the calibration: {e}"))?,
-        )
-    } else {
-        None
+    // Calibration files first: a bad file fails before anything starts.
+    let given = match (&args.material, &args.response) {
+        (Some(material), Some(response)) => Some(Calibration::load(material, response)?),
+        _ => None,
     };
     let entropy_threshold_nats = glint_estimation::nbv::entropy_of_axis_sigmas(
         args.stop_sigma_mm_deg * 1e-3,
@@ -130,6 +142,23 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
              through them over gRPC.",
             server.addr
         );
+        let calibration = match demo_calibration(args, given, &server.addr.to_string()).await {
+            Ok(c) => c,
+            Err(e) => {
+                server.stop().await?;
+                return Err(e);
+            }
+        };
+        let calibration_note = calibration.as_ref().map_or_else(
+            || {
+                format!(
+                    "none: the {} policy renders no predictions",
+                    args.policy.name()
+                )
+            },
+            |(_, note)| note.clone(),
+        );
+        let calibration = calibration.map(|(c, _)| c);
         println!(
             "Active session: {} in a bin of {}, {} candidate views, policy {}, at most {} views, \
              stop below {entropy_threshold_nats:.1} nats ({} mm/{}° per axis).",
@@ -201,6 +230,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
                 object.as_ref(),
                 &outcome,
                 &rows,
+                &calibration_note,
             )
         })
         .await
@@ -212,6 +242,136 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         }
         Ok(())
     })
+}
+
+/// The render workers' calibration, with a note of where it came from for the report: none
+/// when the policy renders nothing, else the files given, else [`calibrate_once`]'s.
+async fn demo_calibration(
+    args: &DemoArgs,
+    given: Option<Calibration>,
+    addr: &str,
+) -> anyhow::Result<Option<(PartCalibration, String)>> {
+    if args.policy.prediction(0.0).is_none() {
+        return Ok(None);
+    }
+    let (files, source) = match given {
+        Some(files) => {
+            println!("Calibration: the files given (--material, --response).");
+            (files, "the files given (--material, --response)".to_owned())
+        }
+        None => calibrate_once(args, addr).await?,
+    };
+    let p = files.material.params()?;
+    let note = format!(
+        "{source}; material base colour {:.3}, metallic {:.3}, roughness {:.3}, specular {:.3}, \
+         radiometric scale {:.1}",
+        p.base_color,
+        p.metallic,
+        p.roughness,
+        p.specular,
+        files.material.radiometric_scale().unwrap_or(f64::NAN)
+    );
+    let calibration =
+        PartCalibration::from_files(&files).map_err(|e| anyhow::anyhow!("the calibration: {e}"))?;
+    Ok(Some((calibration, note)))
+}
+
+/// The part's calibration from the cache in the report folder, or — the first time — through
+/// the calibration service of the in-process servers at `addr` (see
+/// [`glint_client::calibration`]), cached for the next run; with where it came from.
+async fn calibrate_once(args: &DemoArgs, addr: &str) -> anyhow::Result<(Calibration, String)> {
+    let cache = CalibrationCache::of_part(&args.out.join("calibration"), args.part);
+    let cached = cache.load().with_context(|| {
+        format!(
+            "the calibration cached in {} (delete the folder to calibrate again)",
+            cache.dir.display()
+        )
+    })?;
+    if let Some(cached) = cached {
+        println!(
+            "Calibration: cached in {} (delete it to calibrate again).",
+            cache.dir.display()
+        );
+        let source = format!(
+            "cached in {} by an earlier run, which fitted it through the calibration service",
+            cache.dir.display()
+        );
+        return Ok((cached, source));
+    }
+    println!(
+        "Calibration (first run only): no calibration cached in {}; calibrating the {} through \
+         the calibration service — a capture of {CALIBRATION_VIEWS} views × {} exposures of a \
+         bin of known poses at {} spp, the response (CalibrateResponse), the material \
+         (FitBsdf, {} iterations).",
+        cache.dir.display(),
+        args.part.display_name(),
+        CALIBRATION_EXPOSURES_S.len(),
+        args.calibration_spp,
+        args.calibration_iterations,
+    );
+    let spec = MockCalibrationSpec {
+        part: args.part,
+        width_px: args.resolution.0,
+        height_px: args.resolution.1,
+        samples_per_pixel: args.calibration_spp,
+        fit_iterations: args.calibration_iterations,
+    };
+    let started = Instant::now();
+    let capture_bar = glint_eval::progress::bar(CALIBRATION_VIEWS as u64, "calibration capture");
+    // Made once the fit starts: two bars at once would draw over each other.
+    let mut fit_bar = None;
+    let mut losses = (f64::NAN, f64::NAN);
+    let calibration = calibrate_mock_part(addr, &Default::default(), &spec, &cache, |event| {
+        match event {
+            CalibrationEvent::ViewRecorded => capture_bar.inc(1),
+            CalibrationEvent::ResponseSolved {
+                samples,
+                residual_rms,
+            } => {
+                capture_bar.finish_and_clear();
+                println!(
+                    "  response: {samples} sample pixels, residual RMS {residual_rms:.3} (ln units)"
+                );
+            }
+            CalibrationEvent::FitProgress(p) => {
+                if p.iteration == 0 {
+                    losses.0 = p.loss;
+                }
+                losses.1 = p.loss;
+                fit_bar
+                    .get_or_insert_with(|| {
+                        glint_eval::progress::bar(u64::from(p.iterations_total), "BSDF fit")
+                    })
+                    .set_position(u64::from(p.iteration) + 1);
+            }
+        }
+    })
+    .await;
+    capture_bar.finish_and_clear();
+    if let Some(bar) = fit_bar {
+        bar.finish_and_clear();
+    }
+    let calibration = calibration.context("calibrating through the calibration service")?;
+    let p = calibration.material.params()?;
+    println!(
+        "  material: base colour {:.3}, metallic {:.3}, roughness {:.3}, specular {:.3} \
+         (loss {:.4} → {:.4}), radiometric scale {:.1}; {:.1} s in all → {}",
+        p.base_color,
+        p.metallic,
+        p.roughness,
+        p.specular,
+        losses.0,
+        losses.1,
+        calibration.material.radiometric_scale().unwrap_or(f64::NAN),
+        started.elapsed().as_secs_f64(),
+        cache.dir.display()
+    );
+    let source = format!(
+        "fitted through the calibration service on this run ({} s) and cached in {}",
+        started.elapsed().as_secs_f64().round(),
+        cache.dir.display()
+    );
+    Ok((calibration, source))
 }
 
 fn outcome_error(outcome: &RunOutcome) -> Option<&str> {
@@ -286,6 +446,7 @@ fn write_report(
     object: Option<&PredictionObject>,
     outcome: &RunOutcome,
     table: &[String],
+    calibration_note: &str,
 ) -> anyhow::Result<PathBuf> {
     let session = &stored.session;
     let devs = &outcome.deviations;
@@ -354,6 +515,7 @@ fn write_report(
          services. The initial pose comes from a stand-in detector (ground truth perturbed as in \
          <code>glint eval refine</code>): {e0t:.1} mm / {e0r:.1}° off. Errors are against the mock \
          camera's ground truth (evaluation only: the session never reads it).</p>\
+         <p>Calibration of the render workers: {calibration_note}.</p>\
          <img src=\"session.png\"><h2>Steps</h2><pre>{table}</pre>\
          <table><tr><th>step</th><th>view</th><th>points</th><th>h predicted</th><th>h</th><th>error</th>\
          <th>left pattern</th><th>depth</th><th>next view: predicted σ̌_z (0–0.1 mm; red: eq 16, magenta: eq 17, orange: right camera blind)</th></tr>{rows}</table></body></html>",

@@ -353,24 +353,42 @@ fn sessions_beyond_the_orchestrators_limit_wait_their_turn_and_all_complete() {
 fn the_demo_runs_a_session_through_its_servers_and_writes_its_report() {
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("report");
-    let run = common::glint(&[
-        "demo",
-        "--out",
-        dir.to_str().unwrap(),
-        "--resolution",
-        "320x256",
-        "--spp",
-        "1",
+    // A small bin at a quarter of the resolution, with a quick first calibration.
+    let demo = |more: &[&str]| {
+        let mut args = vec![
+            "demo",
+            "--out",
+            dir.to_str().unwrap(),
+            "--resolution",
+            "320x256",
+            "--spp",
+            "1",
+            "--candidates",
+            "6",
+            "--instances",
+            "3",
+        ];
+        args.extend_from_slice(more);
+        common::glint(&args)
+    };
+    let run = demo(&[
         "--max-views",
         "2",
-        "--candidates",
-        "6",
-        "--instances",
-        "3",
+        "--calibration-spp",
+        "4",
+        "--calibration-iterations",
+        "10",
     ]);
     let said = common::printed(&run);
     assert!(run.status.success(), "{said}");
     assert!(said.contains("Report:"), "{said}");
+    // The first run calibrated the part through the calibration service and cached it.
+    assert!(said.contains("Calibration (first run only)"), "{said}");
+    let cache = dir.join("calibration").join("zigzag");
+    let material =
+        glint_calibration::material_file::MaterialFile::load(&cache.join("material.json")).unwrap();
+    assert!(material.radiometric_scale().is_some(), "{material:?}");
+    glint_calibration::response::ResponseTable::load(&cache.join("response.json")).unwrap();
     for file in ["index.html", "session.png", "steps.txt"] {
         assert!(dir.join(file).is_file(), "{file} missing: {said}");
     }
@@ -385,4 +403,11 @@ fn the_demo_runs_a_session_through_its_servers_and_writes_its_report() {
         })
         .count();
     assert!(maps >= 1, "no predicted map in the report: {said}");
+
+    // The next run reads the cache instead of calibrating again.
+    let again = demo(&["--max-views", "1"]);
+    let said = common::printed(&again);
+    assert!(again.status.success(), "{said}");
+    assert!(said.contains("Calibration: cached in"), "{said}");
+    assert!(!said.contains("first run only"), "{said}");
 }

@@ -7,6 +7,8 @@
 //! truth perturbed as in `glint eval refine`, evaluation only), start the session and read its
 //! steps as the orchestrator streams them, each scored against the mock's truth.
 
+pub mod calibration;
+
 use std::time::Duration;
 
 use anyhow::Context;

@@ -26,6 +26,7 @@ use crate::bsdf_fit::scene_fit::{
     CaptureReader, SceneFitConfig, SceneFitError, fit_scene, read_capture,
 };
 
+use crate::material_file::MaterialFile;
 use crate::response::{
     DebevecConfig, ExposureStack, ForwardTable, InverseTable, ResponseError, ResponseTable,
     SolveInfo, calibrate,
@@ -412,17 +413,21 @@ impl CalibrationService for CalibrationServer {
                     Err(_) => ControlFlow::Break(()),
                 }
             });
-            let last = match fitted {
-                Ok(fit) => Ok(v1::FitBsdfEvent {
+            let last = fitted.map_err(fit_status).and_then(|fit| {
+                let file = MaterialFile::new(&fit.result.params, fit.provenance.clone());
+                let material_file_json = serde_json::to_string_pretty(&file)
+                    .map_err(|e| Status::internal(format!("encoding the material file: {e}")))?;
+                Ok(v1::FitBsdfEvent {
                     event: Some(Event::Result(v1::FitBsdfResult {
                         material: Some(material_message(&fit.result.params)),
                         final_loss: fit.result.loss.last().copied().unwrap_or(f64::NAN),
                         judged_l2: fit.judged_l2,
                         elapsed_s: fit.elapsed_s,
+                        material_file_json,
+                        radiometric_scale: file.radiometric_scale().unwrap_or(f64::NAN),
                     })),
-                }),
-                Err(e) => Err(fit_status(e)),
-            };
+                })
+            });
             // Nobody to tell if the client went away.
             let _ = tx.blocking_send(last);
         });

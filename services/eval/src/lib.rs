@@ -6,6 +6,7 @@
 //! - [`metrics`]: initial poses drawn like a template detector's, symmetry-aware NEES;
 //! - [`table1`]: Table I, SDF refinement against ICP;
 //! - [`active`]: an active session on a mock bin (the demo's and the tests');
+//! - [`capture_folder`]: mock captures written as BOP folders, and calibration captures;
 //! - [`policies`]: Fig. 9, the view policies compared;
 //! - [`progress`]: progress bars for long runs.
 //!
@@ -15,6 +16,7 @@
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
 
 pub mod active;
+pub mod capture_folder;
 pub mod metrics;
 pub mod policies;
 pub mod prediction;
