@@ -3,6 +3,7 @@
 
 use std::time::Duration;
 
+use glint_server::load::CallLimits;
 use glint_server::security::{ClientSecurity, ServerSecurity};
 use glint_server::{HealthStatus, ServeConfig, ServerError};
 use tokio::sync::oneshot;
@@ -42,6 +43,17 @@ impl TestServer {
         security: ServerSecurity,
         client: &ClientSecurity,
     ) -> Self {
+        Self::start_with(routes, services, security, client, CallLimits::default()).await
+    }
+
+    /// As [`Self::start_secured`], with `call_limits`.
+    pub async fn start_with(
+        routes: tonic::service::Routes,
+        services: &[&'static str],
+        security: ServerSecurity,
+        client: &ClientSecurity,
+        call_limits: CallLimits,
+    ) -> Self {
         let service = services[0];
         let listener = glint_server::bind("127.0.0.1:0").await.unwrap();
         let target = client.uri(&listener.local_addr().unwrap().to_string());
@@ -53,6 +65,7 @@ impl TestServer {
                 services: services.to_vec(),
                 drain_timeout: Duration::from_millis(300),
                 security,
+                call_limits,
             },
             async {
                 let _ = stop_rx.await;

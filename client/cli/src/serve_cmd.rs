@@ -31,9 +31,26 @@ pub struct ServeArgs {
         default_value_t = 10.0
     )]
     pub drain_timeout_s: f64,
+    /// Calls at work per stage service at most (camera, calibration, uncertainty, estimation;
+    /// the orchestrator bounds its sessions itself). A call beyond it is refused at once with
+    /// RESOURCE_EXHAUSTED and a retry hint (grpc-retry-pushback-ms) instead of queueing.
+    #[arg(long, global = true, env = "GLINT_MAX_CONCURRENT_CALLS",
+          default_value_t = glint_server::load::DEFAULT_MAX_CONCURRENT_CALLS as u32,
+          value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub max_concurrent_calls: u32,
     /// Token and TLS.
     #[command(flatten)]
     pub security: crate::security_args::ServerSecurityArgs,
+}
+
+/// The bounds of `services` at `per_service` calls each; the orchestrator admits sessions
+/// itself.
+fn call_limits(services: &[&'static str], per_service: usize) -> glint_server::load::CallLimits {
+    glint_server::load::CallLimits::each(
+        services,
+        per_service,
+        &[glint_orchestrator::server::SERVICE_NAME],
+    )
 }
 
 #[derive(clap::Subcommand, Clone, Debug)]
@@ -337,6 +354,10 @@ impl InProcessServer {
             listener,
             routes,
             ServeConfig {
+                call_limits: call_limits(
+                    &services,
+                    glint_server::load::DEFAULT_MAX_CONCURRENT_CALLS,
+                ),
                 services,
                 drain_timeout,
                 security: Default::default(),
@@ -426,6 +447,7 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<()> {
             listener,
             routes,
             ServeConfig {
+                call_limits: call_limits(&services, args.max_concurrent_calls as usize),
                 services,
                 drain_timeout,
                 security,

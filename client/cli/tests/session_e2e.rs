@@ -315,7 +315,9 @@ fn serve_all_turns_not_serving_when_told_to_stop() {
 #[test]
 fn sessions_beyond_the_orchestrators_limit_wait_their_turn_and_all_complete() {
     // 6 clients at once against a `glint serve all` that runs 2 sessions at a time: the
-    // others are refused with RESOURCE_EXHAUSTED and a retry hint, wait, and complete.
+    // others are refused with RESOURCE_EXHAUSTED and a retry hint, wait, and complete. Its
+    // stage services take one call at a time: the two running sessions' stage calls are
+    // refused when they meet, and the orchestrator waits the hint and calls again.
     let out = common::glint(&[
         "bench",
         "load",
@@ -325,6 +327,8 @@ fn sessions_beyond_the_orchestrators_limit_wait_their_turn_and_all_complete() {
         "6",
         "--max-running",
         "2",
+        "--max-concurrent-calls",
+        "1",
         "--policy",
         "max-distance",
         "--timeout-s",

@@ -7,6 +7,7 @@
 //!   drains connections within [`ServeConfig::drain_timeout`];
 //! - [`healthcheck`]: the client behind `glint healthcheck` (and container probes);
 //! - [`process::ServerProcess`]: a server as a child process (benchmarks, tests);
+//! - [`load`]: at most N calls of a service at work; beyond, RESOURCE_EXHAUSTED at once;
 //! - [`blocking`]: runs a synchronous library call on tokio's blocking pool, turning a panic
 //!   into INTERNAL instead of a dead worker.
 //!
@@ -14,6 +15,7 @@
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
 
+pub mod load;
 pub mod process;
 pub mod security;
 
@@ -59,6 +61,8 @@ pub struct ServeConfig {
     pub drain_timeout: Duration,
     /// Token and TLS (default: neither).
     pub security: security::ServerSecurity,
+    /// Calls at work per service at most (default: no bound).
+    pub call_limits: load::CallLimits,
 }
 
 /// Binds `addr` (e.g. `127.0.0.1:50051`, port 0 for any free port).
@@ -125,6 +129,8 @@ pub async fn serve(
         .layer(security::BearerAuthLayer::new(
             config.security.token.clone(),
         ))
+        // Inside the token check: a stranger's call takes no place.
+        .layer(load::CallLimitLayer::new(&config.call_limits))
         .add_routes(routes)
         .serve_with_incoming_shutdown(TcpListenerStream::new(listener), signal);
     tokio::pin!(server);

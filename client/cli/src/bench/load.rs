@@ -28,6 +28,11 @@ pub struct LoadBenchArgs {
     /// The started server's --max-running-sessions (ignored with --orchestrator).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=1024))]
     pub max_running: u32,
+    /// The started server's --max-concurrent-calls per stage service (ignored with
+    /// --orchestrator): sessions whose stage calls are refused wait the hint and call again.
+    #[arg(long, default_value_t = glint_server::load::DEFAULT_MAX_CONCURRENT_CALLS as u32,
+          value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub max_concurrent_calls: u32,
     #[arg(long, default_value = "zigzag", value_parser = crate::mesh_cmd::parse_part)]
     pub part: Part,
     /// nbv, nbv-const-sigma, random or max-distance.
@@ -151,6 +156,7 @@ pub fn run(args: &LoadBenchArgs) -> anyhow::Result<()> {
     })?;
     let security = args.security.client()?;
     let max_running = args.max_running.to_string();
+    let max_calls = args.max_concurrent_calls.to_string();
     let (server, orchestrator) = match &args.orchestrator {
         Some(o) => (None, o.clone()),
         None => {
@@ -161,6 +167,8 @@ pub fn run(args: &LoadBenchArgs) -> anyhow::Result<()> {
                 "127.0.0.1:0",
                 "--max-running-sessions",
                 &max_running,
+                "--max-concurrent-calls",
+                &max_calls,
             ];
             let token = args
                 .security

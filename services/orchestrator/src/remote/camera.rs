@@ -11,7 +11,7 @@ use glint_proto::v1::camera_service_client::CameraServiceClient;
 use nalgebra::Isometry3;
 use tokio::runtime::Handle;
 
-use super::{AuthChannel, Endpoint, request, stage_error};
+use super::{AuthChannel, Endpoint, request, stage_error, when_admitted};
 use crate::stages::{CameraInfo, CameraStage, CapturedView, StageError};
 
 /// A camera server (the mock or a real camera's) as the session's camera.
@@ -205,17 +205,8 @@ pub fn view_from_arrays(
     })
 }
 
-impl CameraStage for RemoteCamera {
-    /// `GetRig`, asked anew each time: a mock set up again at another resolution serves the
-    /// next session without a restart (a capture that disagrees with the rig asked just
-    /// before it fails instead of mixing them).
-    fn info(&self) -> Result<CameraInfo, StageError> {
-        self.fetch_info()
-    }
-
-    fn candidate_views(&self, count: usize) -> Result<Vec<Isometry3<f64>>, StageError> {
-        let count = u32::try_from(count)
-            .map_err(|_| StageError::invalid("count", format!("{count} is too many views")))?;
+impl RemoteCamera {
+    fn list_views_once(&self, count: u32) -> Result<Vec<v1::Pose>, StageError> {
         let mut client = self.client.clone();
         let message = request(
             v1::ListCandidateViewsRequest {
@@ -224,22 +215,21 @@ impl CameraStage for RemoteCamera {
             },
             self.endpoint.deadline,
         );
-        let poses = self.call(async move {
+        self.call(async move {
             Ok(client
                 .list_candidate_views(message)
                 .await
                 .map_err(|s| stage_error(&s))?
                 .into_inner()
                 .t_w_c)
-        })?;
-        poses
-            .iter()
-            .map(|p| Isometry3::try_from(p).map_err(bad_reply))
-            .collect()
+        })
     }
 
-    fn capture(&self, t_w_c: &Isometry3<f64>, seed: u64) -> Result<CapturedView, StageError> {
-        let info = self.info()?;
+    fn capture_once(
+        &self,
+        t_w_c: &Isometry3<f64>,
+        seed: u64,
+    ) -> Result<(v1::CaptureHeader, Vec<(String, AssembledArray)>), StageError> {
         let mut client = self.client.clone();
         let message = request(
             v1::CaptureRequest {
@@ -249,14 +239,40 @@ impl CameraStage for RemoteCamera {
             },
             self.endpoint.deadline,
         );
-        let (header, arrays) = self.call(async move {
+        self.call(async move {
             let stream = client
                 .capture(message)
                 .await
                 .map_err(|s| stage_error(&s))?
                 .into_inner();
             read_capture(stream).await
-        })?;
+        })
+    }
+}
+
+/// Every call waits its turn at a camera at its bound of calls ([`when_admitted`]).
+impl CameraStage for RemoteCamera {
+    /// `GetRig`, asked anew each time: a mock set up again at another resolution serves the
+    /// next session without a restart (a capture that disagrees with the rig asked just
+    /// before it fails instead of mixing them).
+    fn info(&self) -> Result<CameraInfo, StageError> {
+        when_admitted(self.endpoint.deadline, || self.fetch_info())
+    }
+
+    fn candidate_views(&self, count: usize) -> Result<Vec<Isometry3<f64>>, StageError> {
+        let count = u32::try_from(count)
+            .map_err(|_| StageError::invalid("count", format!("{count} is too many views")))?;
+        let poses = when_admitted(self.endpoint.deadline, || self.list_views_once(count))?;
+        poses
+            .iter()
+            .map(|p| Isometry3::try_from(p).map_err(bad_reply))
+            .collect()
+    }
+
+    fn capture(&self, t_w_c: &Isometry3<f64>, seed: u64) -> Result<CapturedView, StageError> {
+        let info = self.info()?;
+        let (header, arrays) =
+            when_admitted(self.endpoint.deadline, || self.capture_once(t_w_c, seed))?;
         let measurement = view_from_arrays(t_w_c, &info, header.max_dn, arrays)?;
         Ok(CapturedView {
             measurement,

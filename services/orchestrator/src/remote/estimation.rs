@@ -20,7 +20,7 @@ use nalgebra::{Isometry3, Matrix6};
 use tokio::runtime::Handle;
 use tonic::Code;
 
-use super::{AuthChannel, Endpoint, request, stage_error};
+use super::{AuthChannel, Endpoint, request, stage_error, when_admitted};
 use crate::local::plan_error;
 use crate::stages::{
     CapturedView, EstimationStage, RefineSettings, Refinement, SessionObject, StageError, ViewPlan,
@@ -114,14 +114,16 @@ impl EstimationStage for RemoteEstimation {
     ) -> Result<Refinement, StageError> {
         let started = Instant::now();
         let views: Vec<&ViewMeasurement> = views.iter().map(|v| &v.measurement).collect();
-        let response = match self.refine_once(&self.key_of(object)?, &views, t_w_o, settings) {
-            Err(status) if status.code() == Code::NotFound => {
-                let key = self.register(object)?;
-                self.refine_once(&key, &views, t_w_o, settings)
+        let response = when_admitted(self.endpoint.deadline, || {
+            match self.refine_once(&self.key_of(object)?, &views, t_w_o, settings) {
+                Err(status) if status.code() == Code::NotFound => {
+                    let key = self.register(object)?;
+                    self.refine_once(&key, &views, t_w_o, settings)
+                }
+                other => other,
             }
-            other => other,
-        }
-        .map_err(|s| stage_error(&s))?;
+            .map_err(|s| stage_error(&s))
+        })?;
         let mut refinement = refinement_from_message(&response)
             .map_err(|e| StageError::Internal(format!("the estimation service's answer: {e}")))?;
         if refinement.view_points.len() != views.len() {
@@ -157,12 +159,13 @@ impl EstimationStage for RemoteEstimation {
                 })
                 .collect::<Result<_, _>>()?,
         };
-        let mut client = self.client.clone();
-        let response = self
-            .handle
-            .block_on(client.plan_next_view(request(message, self.endpoint.deadline)))
-            .map_err(|s| stage_error(&s))?
-            .into_inner();
+        let response = when_admitted(self.endpoint.deadline, || {
+            let mut client = self.client.clone();
+            self.handle
+                .block_on(client.plan_next_view(request(message.clone(), self.endpoint.deadline)))
+                .map_err(|s| stage_error(&s))
+        })?
+        .into_inner();
         let chosen = response.chosen as usize;
         if response.entropies_nats.len() != candidates.len() || chosen >= candidates.len() {
             return Err(StageError::Internal(format!(
@@ -186,12 +189,13 @@ impl EstimationStage for RemoteEstimation {
         let message = v1::PoseEntropyRequest {
             information: Some(symmetric(information, "information")?),
         };
-        let mut client = self.client.clone();
-        Ok(self
-            .handle
-            .block_on(client.pose_entropy(request(message, self.endpoint.deadline)))
-            .map_err(|s| stage_error(&s))?
-            .into_inner()
-            .entropy_nats)
+        Ok(when_admitted(self.endpoint.deadline, || {
+            let mut client = self.client.clone();
+            self.handle
+                .block_on(client.pose_entropy(request(message.clone(), self.endpoint.deadline)))
+                .map_err(|s| stage_error(&s))
+        })?
+        .into_inner()
+        .entropy_nats)
     }
 }

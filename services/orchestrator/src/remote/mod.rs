@@ -69,10 +69,32 @@ pub fn request<T>(message: T, deadline: Duration) -> tonic::Request<T> {
     request
 }
 
+/// `call`, made again after the stage's retry hint for as long as the stage answers that it is
+/// overloaded (RESOURCE_EXHAUSTED: a stage server at its `--max-concurrent-calls`), for at most
+/// `patience` in all; then its last answer. A session waits its turn at a busy stage instead of
+/// failing.
+pub fn when_admitted<T>(
+    patience: Duration,
+    mut call: impl FnMut() -> Result<T, StageError>,
+) -> Result<T, StageError> {
+    let started = std::time::Instant::now();
+    loop {
+        match call() {
+            Err(StageError::Overloaded { retry_after_ms, .. }) if started.elapsed() < patience => {
+                tracing::debug!("a stage is overloaded: calling again in {retry_after_ms} ms");
+                std::thread::sleep(Duration::from_millis(retry_after_ms.clamp(10, 10_000)));
+            }
+            result => return result,
+        }
+    }
+}
+
 /// What a failed call means to a session. INVALID_ARGUMENT messages start with the field
 /// (`field: message`, as every Glint server writes them).
-/// The metadata key of gRPC's retry pushback (milliseconds to wait before a retry).
-pub const RETRY_PUSHBACK_KEY: &str = "grpc-retry-pushback-ms";
+pub use glint_server::load::RETRY_PUSHBACK_KEY;
+
+/// The wait after a RESOURCE_EXHAUSTED that names none, ms.
+const DEFAULT_RETRY_AFTER_MS: u64 = 500;
 
 pub fn stage_error(status: &tonic::Status) -> StageError {
     let message = status.message().to_owned();
@@ -83,7 +105,16 @@ pub fn stage_error(status: &tonic::Status) -> StageError {
         },
         Code::NotFound => StageError::NotFound(message),
         Code::FailedPrecondition | Code::OutOfRange => StageError::FailedPrecondition(message),
-        Code::Unavailable | Code::DeadlineExceeded | Code::ResourceExhausted | Code::Aborted => {
+        // A stage at its bound of calls: wait its retry hint and try again.
+        Code::ResourceExhausted => StageError::Overloaded {
+            message,
+            retry_after_ms: status
+                .metadata()
+                .get(RETRY_PUSHBACK_KEY)
+                .and_then(|v| v.to_str().ok()?.parse().ok())
+                .unwrap_or(DEFAULT_RETRY_AFTER_MS),
+        },
+        Code::Unavailable | Code::DeadlineExceeded | Code::Aborted => {
             StageError::Unavailable(format!("{}: {message}", status.code()))
         }
         Code::Cancelled => StageError::Cancelled,
@@ -117,6 +148,38 @@ pub fn status_of(error: &StageError) -> tonic::Status {
 mod tests {
     use super::*;
 
+    fn overloaded() -> StageError {
+        StageError::Overloaded {
+            message: "at its bound".into(),
+            retry_after_ms: 1,
+        }
+    }
+
+    #[test]
+    fn an_overloaded_stage_is_called_again_until_it_admits_the_call() {
+        let mut calls = 0;
+        let answer = when_admitted(Duration::from_secs(10), || {
+            calls += 1;
+            if calls < 3 {
+                Err(overloaded())
+            } else {
+                Ok(calls)
+            }
+        });
+        assert_eq!(answer.unwrap(), 3);
+        // Other errors are not retried ...
+        let mut calls = 0;
+        let answer: Result<(), _> = when_admitted(Duration::from_secs(10), || {
+            calls += 1;
+            Err(StageError::Unavailable("down".into()))
+        });
+        assert!(matches!(answer, Err(StageError::Unavailable(_))));
+        assert_eq!(calls, 1);
+        // ... and patience ends: the last answer is the caller's.
+        let answer: Result<(), _> = when_admitted(Duration::from_millis(50), || Err(overloaded()));
+        assert!(matches!(answer, Err(StageError::Overloaded { .. })));
+    }
+
     #[test]
     fn statuses_round_trip_through_stage_errors() {
         let errors = [
@@ -148,5 +211,20 @@ mod tests {
                 .unwrap(),
             "1000"
         );
+        // ... and back: an overloaded stage, with its retry hint.
+        assert!(matches!(
+            stage_error(&status),
+            StageError::Overloaded {
+                retry_after_ms: 1000,
+                ..
+            }
+        ));
+        assert!(matches!(
+            stage_error(&tonic::Status::resource_exhausted("no hint")),
+            StageError::Overloaded {
+                retry_after_ms: DEFAULT_RETRY_AFTER_MS,
+                ..
+            }
+        ));
     }
 }
