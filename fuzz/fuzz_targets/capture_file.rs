@@ -1,13 +1,7 @@
 //! The session store's capture blobs (`GLINTCAP` v1): whatever reads writes back the same.
+//!
+//! The body is `glint_e2e::fuzz_cases::capture_file`, which `cargo test` also runs on this target's
+//! kept corpus (`tests/tests/fuzz_corpus.rs`).
 #![no_main]
 
-use glint_orchestrator::store::capture_file::{from_bytes, to_bytes};
-use libfuzzer_sys::fuzz_target;
-
-fuzz_target!(|data: &[u8]| {
-    if let Ok(view) = from_bytes(data) {
-        let again = to_bytes(&view).expect("a capture read back writes");
-        let view_again = from_bytes(&again).expect("a written capture reads");
-        assert_eq!(to_bytes(&view_again).expect("writes"), again);
-    }
-});
+libfuzzer_sys::fuzz_target!(|data: &[u8]| glint_e2e::fuzz_cases::capture_file(data));

@@ -1,5 +1,8 @@
 //! Glint's workspace end-to-end tests live in `tests/`; this library holds what they share:
-//! a stage server started on a free loopback port.
+//! a stage server started on a free loopback port, and the fuzz targets' bodies
+//! ([`fuzz_cases`]), which `fuzz/` runs under libFuzzer and `tests/fuzz_corpus.rs` replays.
+
+pub mod fuzz_cases;
 
 use std::time::Duration;
 

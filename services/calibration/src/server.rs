@@ -217,41 +217,12 @@ pub fn response_from_message(
         }
         finite(field, values)?;
     }
-    let (grid, intensity) = (&msg.forward_ln_exposure, &msg.forward_intensity);
-    if grid.len() < 2 {
-        return Err(E::new("forward_ln_exposure", "needs at least 2 values"));
-    }
-    if intensity.len() != grid.len() {
-        return Err(E::new(
-            "forward_intensity",
-            format!(
-                "has {} values but forward_ln_exposure has {}",
-                intensity.len(),
-                grid.len()
-            ),
-        ));
-    }
-    finite("forward_ln_exposure", grid)?;
-    finite("forward_intensity", intensity)?;
-    // g is read by interpolation on a uniform grid (`ResponseTable::intensity`).
-    let step = (grid[grid.len() - 1] - grid[0]) / (grid.len() - 1) as f64;
-    if step <= 0.0
-        || grid
-            .iter()
-            .enumerate()
-            .any(|(k, x)| (x - (grid[0] + step * k as f64)).abs() > 1e-6 * step)
-    {
-        return Err(E::new(
-            "forward_ln_exposure",
-            "must be a uniform, increasing grid of ln X",
-        ));
-    }
-    if let Some(i) = intensity.iter().position(|v| !(0.0..=1.0).contains(v)) {
-        return Err(E::new(
-            "forward_intensity",
-            format!("value {i} is {}, outside [0, 1]", intensity[i]),
-        ));
-    }
+    let forward = ForwardTable {
+        ln_exposure: msg.forward_ln_exposure.clone(),
+        intensity: msg.forward_intensity.clone(),
+    };
+    crate::response::check_forward(&forward)
+        .map_err(|(field, problem)| E::new(format!("forward_{field}"), problem))?;
     Ok(ResponseTable {
         format: crate::response::RESPONSE_FORMAT.to_owned(),
         bit_depth,
@@ -260,10 +231,7 @@ pub fn response_from_message(
             dn: msg.inverse_dn.clone(),
             ln_exposure: msg.inverse_ln_exposure.clone(),
         },
-        forward: ForwardTable {
-            ln_exposure: grid.clone(),
-            intensity: intensity.clone(),
-        },
+        forward,
         solve: SolveInfo {
             lambda: 0.0,
             samples: 0,

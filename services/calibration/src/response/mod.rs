@@ -265,8 +265,54 @@ impl ResponseTable {
         if table.inverse.ln_exposure.iter().any(|x| !x.is_finite()) {
             return Err(fail("inverse.ln_exposure has a non-finite value".into()));
         }
+        check_forward(&table.forward)
+            .map_err(|(field, problem)| fail(format!("forward.{field}: {problem}")))?;
         Ok(table)
     }
+}
+
+/// Checks that g's table is one [`ResponseTable::intensity`] can read: at least 2 points, as
+/// many intensities as grid points, all finite, ln X a uniform increasing grid, intensities in
+/// [0, 1]. On failure: the field (`ln_exposure` or `intensity`) and the problem.
+pub fn check_forward(forward: &ForwardTable) -> Result<(), (&'static str, String)> {
+    let (grid, intensity) = (&forward.ln_exposure, &forward.intensity);
+    if grid.len() < 2 {
+        return Err(("ln_exposure", "needs at least 2 values".into()));
+    }
+    if intensity.len() != grid.len() {
+        return Err((
+            "intensity",
+            format!(
+                "has {} values but ln_exposure has {}",
+                intensity.len(),
+                grid.len()
+            ),
+        ));
+    }
+    for (field, values) in [("ln_exposure", grid), ("intensity", intensity)] {
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err((field, format!("value {i} is {}, not finite", values[i])));
+        }
+    }
+    let step = (grid[grid.len() - 1] - grid[0]) / (grid.len() - 1) as f64;
+    if step <= 0.0
+        || grid
+            .iter()
+            .enumerate()
+            .any(|(k, x)| (x - (grid[0] + step * k as f64)).abs() > 1e-6 * step)
+    {
+        return Err((
+            "ln_exposure",
+            "must be a uniform, increasing grid of ln X".into(),
+        ));
+    }
+    if let Some(i) = intensity.iter().position(|v| !(0.0..=1.0).contains(v)) {
+        return Err((
+            "intensity",
+            format!("value {i} is {}, outside [0, 1]", intensity[i]),
+        ));
+    }
+    Ok(())
 }
 
 /// g from g⁻¹: ln X uniform over the inner levels' range, intensity by linear interpolation of

@@ -248,3 +248,32 @@ fn the_forward_response_inverts_the_recovered_inverse() {
     assert!(table.intensity(grid[grid.len() - 1] + 5.0) > 0.99);
     assert!(table.intensity(grid[0] - 20.0) < 1e-6);
 }
+
+/// Found by fuzzing (`fuzz/corpus/calibration_files/regression-response-short-forward-table`):
+/// a response file whose forward table had fewer intensities than grid points was read, and
+/// `intensity` then indexed past its end. Every forward-table defect is now refused on reading,
+/// naming the field.
+#[test]
+fn a_response_file_with_a_broken_forward_table_is_refused_naming_the_field() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../assets/calibration/zigzag/response.json");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let good = ResponseTable::parse(&text, &path).unwrap();
+    let refused = |edit: &dyn Fn(&mut ResponseTable)| {
+        let mut table = good.clone();
+        edit(&mut table);
+        let text = serde_json::to_string(&table).unwrap();
+        ResponseTable::parse(&text, &path).unwrap_err().to_string()
+    };
+    let e = refused(&|t| t.forward.intensity.truncate(3));
+    assert!(e.contains("forward.intensity"), "{e}");
+    let e = refused(&|t| t.forward.ln_exposure[4] += 0.5);
+    assert!(e.contains("forward.ln_exposure"), "{e}");
+    let e = refused(&|t| t.forward.intensity[2] = 1.5);
+    assert!(e.contains("forward.intensity"), "{e}");
+    let e = refused(&|t| {
+        t.forward.ln_exposure.truncate(1);
+        t.forward.intensity.truncate(1);
+    });
+    assert!(e.contains("forward.ln_exposure"), "{e}");
+}
