@@ -202,7 +202,7 @@ pub fn rpc_requests(data: &[u8]) {
         return;
     };
     let bin = BinSpec::default();
-    match pick % 12 {
+    match pick % 14 {
         // CameraService
         0 => {
             if let Some(m) = decoded::<v1::SetUpSceneRequest>(bytes) {
@@ -274,6 +274,29 @@ pub fn rpc_requests(data: &[u8]) {
             }
             if let Some(m) = decoded::<v1::SensorNoiseModel>(bytes) {
                 let _ = glint_uncertainty::server::noise_from_message(&m);
+            }
+        }
+        // EstimationService: PlanNextView, PoseEntropy, RegisterMesh
+        12 => {
+            if let Some(m) = decoded::<v1::PlanNextViewRequest>(bytes)
+                && let Ok((collected, candidates, taken)) =
+                    glint_estimation::server::plan_request(&m)
+            {
+                let prior = glint_estimation::nbv::PosePrior::default();
+                let _ =
+                    glint_estimation::nbv::plan_next_view(&collected, &candidates, &taken, &prior);
+            }
+            if let Some(m) = decoded::<v1::PoseEntropyRequest>(bytes)
+                && let Ok(information) =
+                    glint_estimation::server::matrix(&m.information, "information")
+            {
+                let prior = glint_estimation::nbv::PosePrior::default();
+                let _ = glint_estimation::nbv::pose_entropy_nats(&information, &prior);
+            }
+        }
+        13 => {
+            if let Some(m) = decoded::<v1::MeshFile>(bytes) {
+                let _ = glint_geometry::io::LoadedMesh::try_from(&m);
             }
         }
         // OrchestratorService

@@ -735,8 +735,41 @@ fn plan_status(e: NbvError) -> Status {
     invalid(&field, &e.to_string())
 }
 
-fn matrix(m: &Option<v1::SymmetricMatrix6>, field: &str) -> Result<Matrix6<f64>, ConversionError> {
+/// A required 6×6 symmetric matrix (its upper triangle on the wire); `field` names it in errors.
+pub fn matrix(
+    m: &Option<v1::SymmetricMatrix6>,
+    field: &str,
+) -> Result<Matrix6<f64>, ConversionError> {
     Matrix6::try_from(required(m, field)?).map_err(|e| e.within(field))
+}
+
+/// A PlanNextView request as the planner's input: the information collected, each candidate's,
+/// and the candidates taken. Rejections name the field.
+pub fn plan_request(
+    request: &v1::PlanNextViewRequest,
+) -> Result<(Matrix6<f64>, Vec<Matrix6<f64>>, Vec<usize>), Status> {
+    let collected = matrix(&request.collected, "collected")?;
+    let n = request.candidates.len();
+    if n == 0 {
+        return Err(invalid(
+            "candidates",
+            "is empty; send at least one candidate",
+        ));
+    }
+    if n > MAX_CANDIDATES {
+        return Err(invalid(
+            "candidates",
+            &format!("has {n} matrices; at most {MAX_CANDIDATES}"),
+        ));
+    }
+    let candidates = request
+        .candidates
+        .iter()
+        .enumerate()
+        .map(|(i, m)| Matrix6::try_from(m).map_err(|e| e.within(&format!("candidates[{i}]"))))
+        .collect::<Result<Vec<_>, _>>()?;
+    let taken = request.taken.iter().map(|&i| i as usize).collect();
+    Ok((collected, candidates, taken))
 }
 
 #[tonic::async_trait]
@@ -807,28 +840,7 @@ impl EstimationService for Estimation {
         &self,
         request: Request<v1::PlanNextViewRequest>,
     ) -> Result<Response<v1::PlanNextViewResponse>, Status> {
-        let request = request.into_inner();
-        let collected = matrix(&request.collected, "collected")?;
-        let n = request.candidates.len();
-        if n == 0 {
-            return Err(invalid(
-                "candidates",
-                "is empty; send at least one candidate",
-            ));
-        }
-        if n > MAX_CANDIDATES {
-            return Err(invalid(
-                "candidates",
-                &format!("has {n} matrices; at most {MAX_CANDIDATES}"),
-            ));
-        }
-        let candidates = request
-            .candidates
-            .iter()
-            .enumerate()
-            .map(|(i, m)| Matrix6::try_from(m).map_err(|e| e.within(&format!("candidates[{i}]"))))
-            .collect::<Result<Vec<_>, _>>()?;
-        let taken: Vec<usize> = request.taken.iter().map(|&i| i as usize).collect();
+        let (collected, candidates, taken) = plan_request(&request.into_inner())?;
         let prior = self.prior;
         let plan =
             glint_server::blocking(move || plan_next_view(&collected, &candidates, &taken, &prior))
