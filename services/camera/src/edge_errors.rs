@@ -41,7 +41,8 @@ pub fn distance_to_depth_edge(gt_depth_m: &Image<f32>) -> Image<u32> {
         _ => true,
     };
     let far = u32::MAX / 2;
-    let mut d = vec![far; w * h];
+    let mut distance = Image::filled_like(gt_depth_m, far);
+    let d = distance.data_mut();
     for v in 0..h {
         for u in 0..w {
             let i = v * w + u;
@@ -93,11 +94,11 @@ pub fn distance_to_depth_edge(gt_depth_m: &Image<f32>) -> Image<u32> {
             d[i] = best;
         }
     }
-    let data = d
-        .into_iter()
-        .map(|x| if x >= far { u32::MAX } else { x })
-        .collect();
-    Image::new(w as u32, h as u32, data).expect("same size")
+    // Still `far` (or more): no edge reached it, so the image has none.
+    for x in d.iter_mut().filter(|x| **x >= far) {
+        *x = u32::MAX;
+    }
+    distance
 }
 
 /// Bins the matched depth of the part pixels (labels `labels`) of `capture` by distance to

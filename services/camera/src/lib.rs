@@ -1,6 +1,8 @@
 //! The mock structured-light camera: bins of shiny parts, simulated SLI captures with real
 //! stereo matching, and the dataset formats captures are written in.
 
+#![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+
 pub mod bin;
 pub mod capture;
 pub mod dataset;

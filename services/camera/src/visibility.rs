@@ -42,23 +42,15 @@ pub fn instance_visibility(
     labels
         .iter()
         .map(|&label| {
-            let (w, h) = (visible_labels.width(), visible_labels.height());
             let instance = scene.instances().iter().position(|i| i.label == label);
             let amodal = match instance {
                 Some(i) => {
                     let roi = projected_bounds(scene, camera, i as u32);
                     render_labels(scene, camera, roi, Some(i as u32))
                 }
-                None => Image::filled(w, h, 0u16).expect("the label image's size"),
+                None => Image::filled_like(&visible_labels, 0u16),
             };
-            let to_mask = |img: &Image<u16>| {
-                let data = img
-                    .data()
-                    .iter()
-                    .map(|&l| if l == label { 255u8 } else { 0 })
-                    .collect();
-                Image::new(w, h, data).expect("same size")
-            };
+            let to_mask = |img: &Image<u16>| img.map(|l| if l == label { 255u8 } else { 0 });
             let (mask_all, mask_visib) = (to_mask(&amodal), to_mask(&visible_labels));
             let count = |m: &Image<u8>| m.data().iter().filter(|&&x| x != 0).count() as u64;
             let (px_count_all, px_count_visib) = (count(&mask_all), count(&mask_visib));

@@ -116,7 +116,7 @@ impl NoiseModel {
             return Err(DepthSigmaError::ShotsDiffer { rms });
         }
         let floor_variance = dn * dn / 12.0;
-        let mut estimate: Vec<Option<f64>> = samples
+        let estimate: Vec<Option<f64>> = samples
             .iter_mut()
             .map(|s| {
                 if s.len() < Self::MIN_BIN_SAMPLES {
@@ -128,22 +128,24 @@ impl NoiseModel {
                 Some((kept.iter().sum::<f64>() / kept.len() as f64).max(floor_variance))
             })
             .collect();
-        // Empty bins take the nearest filled bin's value (constant extrapolation).
-        let filled: Vec<usize> = (0..n).filter(|&k| estimate[k].is_some()).collect();
-        if filled.is_empty() {
-            return Err(DepthSigmaError::TooFewNoiseSamples { pixels: used });
-        }
-        for k in 0..n {
-            if estimate[k].is_none() {
-                let nearest = *filled
+        // Empty bins take the nearest filled bin's value (constant extrapolation; the lower
+        // bin on a tie). A filled bin is its own nearest.
+        let filled: Vec<(usize, f64)> = estimate
+            .iter()
+            .enumerate()
+            .filter_map(|(k, v)| v.map(|v| (k, v)))
+            .collect();
+        let variance_by_bin = (0..n)
+            .map(|k| {
+                filled
                     .iter()
-                    .min_by_key(|&&f| f.abs_diff(k))
-                    .expect("non-empty");
-                estimate[k] = estimate[nearest];
-            }
-        }
+                    .min_by_key(|(f, _)| f.abs_diff(k))
+                    .map(|&(_, v)| v)
+            })
+            .collect::<Option<Vec<f64>>>()
+            .ok_or(DepthSigmaError::TooFewNoiseSamples { pixels: used })?;
         Ok(Self {
-            variance_by_bin: estimate.into_iter().map(|v| v.expect("filled")).collect(),
+            variance_by_bin,
             floor_variance,
         })
     }
@@ -262,7 +264,7 @@ pub fn depth_sigma_shifted(
             )
         })
     };
-    let mut sigma = Image::filled(w, h, f32::NAN).expect("non-zero size");
+    let mut sigma = Image::filled_like(first, f32::NAN);
     for v in 0..h {
         for u in 0..w {
             let Some(z) = depth.get(u, v) else { continue };

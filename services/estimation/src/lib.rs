@@ -13,6 +13,8 @@
 //! Conventions are the geometry crate's: metres, `t_a_b` maps b → a, left perturbations
 //! `T ← exp(δ)·T` with δ = (ρ, φ). Nothing here reads ground truth.
 
+#![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+
 pub mod depth_sigma;
 pub mod icp;
 pub mod multiview;

@@ -85,6 +85,9 @@ pub fn object_points(
 /// radius_px`. A stereo matcher's window that straddles a silhouette mixes the object with
 /// whatever is behind it and may report the background's depth for an object pixel ("edge
 /// fattening"); the interior's depth comes from the object alone.
+///
+/// # Panics
+/// When `width` or `height` is 0: the size is meant to be an image's, which never is.
 pub fn interior_mask(
     width: u32,
     height: u32,
@@ -111,7 +114,10 @@ pub fn interior_mask(
                 ) == full
         })
         .collect();
-    Image::new(width, height, data).expect("width × height samples")
+    // `data` has width × height samples by construction, so only a zero side (no image's
+    // size, see the doc) can fail; the signature has no error to report it with.
+    #[allow(clippy::expect_used)]
+    Image::new(width, height, data).expect("interior_mask needs an image's non-zero size")
 }
 
 #[cfg(test)]

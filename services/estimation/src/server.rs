@@ -743,11 +743,12 @@ pub fn matrix(
     Matrix6::try_from(required(m, field)?).map_err(|e| e.within(field))
 }
 
-/// A PlanNextView request as the planner's input: the information collected, each candidate's,
-/// and the candidates taken. Rejections name the field.
-pub fn plan_request(
-    request: &v1::PlanNextViewRequest,
-) -> Result<(Matrix6<f64>, Vec<Matrix6<f64>>, Vec<usize>), Status> {
+/// The planner's input from a PlanNextView request: the information collected, each
+/// candidate's, and the candidates taken.
+pub type PlanInput = (Matrix6<f64>, Vec<Matrix6<f64>>, Vec<usize>);
+
+/// A PlanNextView request as the planner's input. Rejections name the field.
+pub fn plan_request(request: &v1::PlanNextViewRequest) -> Result<PlanInput, Status> {
     let collected = matrix(&request.collected, "collected")?;
     let n = request.candidates.len();
     if n == 0 {

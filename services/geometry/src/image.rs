@@ -60,6 +60,16 @@ impl<T: Copy> Image<T> {
         Self::new(width, height, vec![value; width as usize * height as usize])
     }
 
+    /// An image of `other`'s size with every pixel `value`: cannot fail, as `other`'s size is
+    /// already valid. The blank canvas for a per-pixel result of `other`.
+    pub fn filled_like<U>(other: &Image<U>, value: T) -> Self {
+        Self {
+            width: other.width,
+            height: other.height,
+            data: vec![value; other.data.len()],
+        }
+    }
+
     pub fn width(&self) -> u32 {
         self.width
     }

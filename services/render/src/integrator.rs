@@ -115,6 +115,9 @@ impl Camera {
 }
 
 /// Renders what `camera` sees of `scene` under `projector`.
+///
+/// # Panics
+/// When the camera's intrinsics have a zero side (see [`PinholeIntrinsics::new`]).
 pub fn render(
     scene: &Scene,
     camera: &Camera,
@@ -154,15 +157,16 @@ pub(crate) fn render_with_sinks<S: DirectSink>(
         .roi
         .and_then(|r| r.clipped_to(w, h))
         .unwrap_or(PixelRect::full(w, h));
-    let mut radiance = vec![0f32; (w * h) as usize];
-    let mut depth = vec![f32::NAN; (w * h) as usize];
-    let mut label = vec![0u16; (w * h) as usize];
+    let mut radiance = camera_image(k, 0f32);
+    let mut depth = Image::filled_like(&radiance, f32::NAN);
+    let mut label = Image::filled_like(&radiance, 0u16);
     let (rotation, origin) = camera.rotation_and_origin();
     let spp = settings.samples_per_pixel.max(1);
     let rows = radiance
+        .data_mut()
         .par_chunks_mut(w as usize)
-        .zip(depth.par_chunks_mut(w as usize))
-        .zip(label.par_chunks_mut(w as usize))
+        .zip(depth.data_mut().par_chunks_mut(w as usize))
+        .zip(label.data_mut().par_chunks_mut(w as usize))
         .zip(sinks.par_iter_mut());
     let rays_traced: u64 = rows
         .enumerate()
@@ -207,11 +211,23 @@ pub(crate) fn render_with_sinks<S: DirectSink>(
         })
         .sum();
     RenderOutput {
-        radiance: Image::new(w, h, radiance).expect("sized from the intrinsics"),
-        depth_m: Image::new(w, h, depth).expect("sized from the intrinsics"),
-        label: Image::new(w, h, label).expect("sized from the intrinsics"),
+        radiance,
+        depth_m: depth,
+        label,
         rays_traced,
     }
+}
+
+/// A blank image of the camera's size, every pixel `value`.
+///
+/// # Panics
+/// When `k` has a zero side, which no constructor of [`PinholeIntrinsics`] (`new`, `resized`,
+/// `cropped`) nor Glint's rig and camera readers let through: only a hand-built value can.
+fn camera_image<T: Copy>(k: &PinholeIntrinsics, value: T) -> Image<T> {
+    // A zero side breaks the invariant every `PinholeIntrinsics` constructor checks; a render
+    // has no image to return for it (`par_chunks_mut(0)` would panic too).
+    #[allow(clippy::expect_used)]
+    Image::filled(k.width_px, k.height_px, value).expect("intrinsics have non-zero sides")
 }
 
 /// The camera ray through continuous pixel coordinates (u, v) (pixel centres at +0.5): its unit
@@ -233,6 +249,9 @@ fn camera_ray(
 /// The label of the first surface through each pixel centre (0 where nothing is hit): primary
 /// rays only, no shading. With `only_instance`, every other instance is transparent, which
 /// gives that instance's whole (amodal) silhouette. Pixels outside `roi` stay 0.
+///
+/// # Panics
+/// When the camera's intrinsics have a zero side (see [`PinholeIntrinsics::new`]).
 pub fn render_labels(
     scene: &Scene,
     camera: &Camera,
@@ -241,12 +260,13 @@ pub fn render_labels(
 ) -> Image<u16> {
     let k = &camera.intrinsics;
     let (w, h) = (k.width_px, k.height_px);
-    let mut label = vec![0u16; (w * h) as usize];
+    let mut label = camera_image(k, 0u16);
     let Some(roi) = roi.map_or(Some(PixelRect::full(w, h)), |r| r.clipped_to(w, h)) else {
-        return Image::new(w, h, label).expect("sized from the intrinsics");
+        return label;
     };
     let (rotation, origin) = camera.rotation_and_origin();
     label
+        .data_mut()
         .par_chunks_mut(w as usize)
         .enumerate()
         .filter(|(v, _)| (roi.v_min..roi.v_min + roi.height).contains(&(*v as u32)))
@@ -262,7 +282,7 @@ pub fn render_labels(
                 }
             }
         });
-    Image::new(w, h, label).expect("sized from the intrinsics")
+    label
 }
 
 /// The projector's direct light reflected at `hit` towards `towards_previous` (local frame): the

@@ -3,6 +3,8 @@
 //! Monochrome throughout (SLI cameras are grey-scale): radiance is one `f32` per pixel in
 //! W·sr⁻¹·m⁻² for a projector intensity in W/sr.
 
+#![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+
 pub mod bsdf;
 pub mod exr_io;
 pub mod integrator;

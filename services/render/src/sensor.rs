@@ -3,7 +3,7 @@
 
 use glint_geometry::image::Image;
 use rand::SeedableRng;
-use rand_distr::{Distribution, Normal, Poisson};
+use rand_distr::{Distribution, Poisson, StandardNormal};
 use rayon::prelude::*;
 
 /// A monotone camera response `g`: normalised exposure x = electrons / full well, in [0, ∞),
@@ -114,10 +114,10 @@ impl Sensor {
     /// quantisation. Reproducible for a given `seed` whatever the thread count.
     pub fn read_out(&self, radiance: &Image<f32>, seed: u64) -> Image<u16> {
         let width = radiance.width() as usize;
-        let mut dn = vec![0u16; radiance.data().len()];
-        let read = Normal::new(0.0f32, self.read_noise_e.max(0.0))
-            .unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("σ = 0 is valid"));
-        dn.par_chunks_mut(width).enumerate().for_each(|(row, out)| {
+        let mut dn = Image::filled_like(radiance, 0u16);
+        let read_sigma_e = self.read_noise_sigma_e();
+        let rows = dn.data_mut().par_chunks_mut(width);
+        rows.enumerate().for_each(|(row, out)| {
             let mut rng = rand_pcg::Pcg64::seed_from_u64(
                 seed ^ (row as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             );
@@ -130,10 +130,20 @@ impl Sensor {
                 } else {
                     0.0
                 };
-                *o = self.quantise(shot + read.sample(&mut rng));
+                // σ·z with z ~ N(0, 1) from the same stream: what `Normal::new(0, σ).sample`
+                // draws, without its fallible constructor.
+                let z: f32 = StandardNormal.sample(&mut rng);
+                *o = self.quantise(shot + read_sigma_e * z);
             }
         });
-        Image::new(radiance.width(), radiance.height(), dn).expect("same size as the input")
+        dn
+    }
+
+    /// The read noise's standard deviation in electrons: `read_noise_e`, with a negative, NaN
+    /// or infinite value read as 0 (noise-free).
+    fn read_noise_sigma_e(&self) -> f32 {
+        let sigma = self.read_noise_e.max(0.0); // NaN.max(0) is 0
+        if sigma.is_finite() { sigma } else { 0.0 }
     }
 }
 

@@ -53,6 +53,20 @@ pub enum DatasetError {
         #[source]
         source: image::ImageError,
     },
+    /// An image could not be encoded for writing.
+    #[error("{}: cannot encode the image as PNG", path.display())]
+    ImageEncode {
+        path: PathBuf,
+        #[source]
+        source: image::ImageError,
+    },
+    /// A record could not be encoded as JSON (a writer bug: Glint's records always encode).
+    #[error("{}: cannot encode the record as JSON (a bug in Glint's writer)", path.display())]
+    JsonEncode {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
     /// An image decoded, but is not what the file must hold (bit depth, channels, size).
     #[error("{}: {problem}", path.display())]
     ImageContent { path: PathBuf, problem: String },
@@ -92,6 +106,8 @@ impl DatasetError {
             | Self::Field { path, .. }
             | Self::Line { path, .. }
             | Self::ImageDecode { path, .. }
+            | Self::ImageEncode { path, .. }
+            | Self::JsonEncode { path, .. }
             | Self::ImageContent { path, .. }
             | Self::Pixel { path, .. }
             | Self::Invalid { path, .. } => path.clone(),

@@ -16,12 +16,11 @@
 use std::path::{Path, PathBuf};
 
 use glint_geometry::image::Image;
-use glint_geometry::io::write_file_atomically;
 use serde_json::json;
 
 use super::error::{DatasetError, create_directory};
 use super::image_files::{decode_image, gray8_from, gray16_from, write_png_u8, write_png_u16};
-use super::json::{JsonNode, read_json_file};
+use super::json::{JsonNode, read_json_file, write_pretty_json};
 use crate::exposure::ExposureStack;
 
 /// The stack's description file inside its directory.
@@ -77,9 +76,7 @@ pub fn write_exposure_stack(dir: &Path, stack: &ExposureStack) -> Result<(), Dat
         let file = format!("dt_{k:03}.png");
         let path = dir.join(&file);
         if stack.bit_depth <= 8 {
-            let data = image.data().iter().map(|&d| d.min(255) as u8).collect();
-            let bytes = Image::new(image.width(), image.height(), data).expect("same size");
-            write_png_u8(&path, &bytes)?;
+            write_png_u8(&path, &image.map(|d| d.min(255) as u8))?;
         } else {
             write_png_u16(&path, image)?;
         }
@@ -91,9 +88,7 @@ pub fn write_exposure_stack(dir: &Path, stack: &ExposureStack) -> Result<(), Dat
         "bit_depth": stack.bit_depth,
         "images": entries,
     });
-    let mut bytes = serde_json::to_vec_pretty(&value).expect("JSON values serialise");
-    bytes.push(b'\n');
-    Ok(write_file_atomically(&json_path, &bytes)?)
+    write_pretty_json(&json_path, &value)
 }
 
 impl ExposureStackFiles {
@@ -147,9 +142,7 @@ impl ExposureStackFiles {
             let path = dir.join(relative);
             let decoded = decode_image(&path)?;
             let image = if bit_depth <= 8 {
-                let gray = gray8_from(&path, decoded)?;
-                let data = gray.data().iter().map(|&d| d as u16).collect();
-                Image::new(gray.width(), gray.height(), data).expect("same size")
+                gray8_from(&path, decoded)?.map(u16::from)
             } else {
                 gray16_from(&path, decoded)?
             };

@@ -9,7 +9,7 @@ use std::path::Path;
 
 use glint_geometry::image::{DepthMap, Image};
 use glint_geometry::io::write_file_atomically;
-use image::{DynamicImage, ImageBuffer, ImageFormat, ImageReader, Luma};
+use image::{DynamicImage, ImageBuffer, ImageFormat, ImageReader, Luma, Primitive};
 
 use super::error::{DatasetError, read_file};
 use super::transforms::MM_PER_M;
@@ -150,38 +150,38 @@ fn into_image<T: Copy>(
     })
 }
 
-/// The bytes of an 8-bit gray PNG.
-pub(crate) fn encode_png_u8(image: &Image<u8>) -> Vec<u8> {
-    let buffer: ImageBuffer<Luma<u8>, Vec<u8>> =
-        ImageBuffer::from_raw(image.width(), image.height(), image.data().to_vec())
-            .expect("an Image holds width × height samples");
-    encode_png(DynamicImage::ImageLuma8(buffer))
+/// `image` as the `image` crate's gray buffer of the same size.
+fn gray_buffer<T: Primitive>(image: &Image<T>) -> ImageBuffer<Luma<T>, Vec<T>> {
+    let mut buffer = ImageBuffer::new(image.width(), image.height());
+    // Both are row-major with width × height samples.
+    for (pixel, &value) in buffer.pixels_mut().zip(image.data()) {
+        *pixel = Luma([value]);
+    }
+    buffer
 }
 
-/// The bytes of a 16-bit gray PNG.
-pub(crate) fn encode_png_u16(image: &Image<u16>) -> Vec<u8> {
-    let buffer: ImageBuffer<Luma<u16>, Vec<u16>> =
-        ImageBuffer::from_raw(image.width(), image.height(), image.data().to_vec())
-            .expect("an Image holds width × height samples");
-    encode_png(DynamicImage::ImageLuma16(buffer))
-}
-
-fn encode_png(image: DynamicImage) -> Vec<u8> {
+/// The bytes of `image` as a PNG for the file at `path` (named in errors).
+fn encode_png(path: &Path, image: DynamicImage) -> Result<Vec<u8>, DatasetError> {
     let mut bytes = Cursor::new(Vec::new());
     image
         .write_to(&mut bytes, ImageFormat::Png)
-        .expect("PNG encoding of a gray image into memory cannot fail");
-    bytes.into_inner()
+        .map_err(|source| DatasetError::ImageEncode {
+            path: path.to_owned(),
+            source,
+        })?;
+    Ok(bytes.into_inner())
 }
 
 /// Writes an 8-bit gray PNG atomically.
 pub fn write_png_u8(path: &Path, image: &Image<u8>) -> Result<(), DatasetError> {
-    Ok(write_file_atomically(path, &encode_png_u8(image))?)
+    let bytes = encode_png(path, DynamicImage::ImageLuma8(gray_buffer(image)))?;
+    Ok(write_file_atomically(path, &bytes)?)
 }
 
 /// Writes a 16-bit gray PNG atomically.
 pub(crate) fn write_png_u16(path: &Path, image: &Image<u16>) -> Result<(), DatasetError> {
-    Ok(write_file_atomically(path, &encode_png_u16(image))?)
+    let bytes = encode_png(path, DynamicImage::ImageLuma16(gray_buffer(image)))?;
+    Ok(write_file_atomically(path, &bytes)?)
 }
 
 /// Encodes a depth map (metres, NaN or 0 where missing) as 16-bit depth units of
@@ -202,8 +202,8 @@ pub fn depth_to_units(
     }
     let image = &depth.depth_m;
     let units_per_m = MM_PER_M / depth_unit_mm;
-    let mut units = Vec::with_capacity(image.data().len());
-    for (index, &z_m) in image.data().iter().enumerate() {
+    let mut units = Image::filled_like(image, 0u16);
+    for (index, (&z_m, unit)) in image.data().iter().zip(units.data_mut()).enumerate() {
         let pixel_error = |problem: String| DatasetError::Pixel {
             path: path.to_owned(),
             u: (index % image.width() as usize) as u32,
@@ -211,8 +211,7 @@ pub fn depth_to_units(
             problem,
         };
         if z_m.is_nan() || z_m == 0.0 {
-            units.push(0);
-            continue;
+            continue; // stays 0, "missing"
         }
         let value = (z_m as f64 * units_per_m).round();
         if z_m < 0.0 || value > u16::MAX as f64 {
@@ -227,27 +226,22 @@ pub fn depth_to_units(
                 "depth {z_m} m rounds to 0 units of {depth_unit_mm} mm, which means \"missing\""
             )));
         }
-        units.push(value as u16);
+        *unit = value as u16;
     }
-    Ok(Image::new(image.width(), image.height(), units).expect("same size as the depth map"))
+    Ok(units)
 }
 
 /// Decodes 16-bit depth units of `depth_unit_mm` millimetres into a depth map in metres, NaN
 /// where the file has 0.
 pub fn depth_from_units(units: &Image<u16>, depth_unit_mm: f64) -> DepthMap {
     let m_per_unit = depth_unit_mm / MM_PER_M;
-    let data = units
-        .data()
-        .iter()
-        .map(|&unit| {
-            if unit == 0 {
-                f32::NAN
-            } else {
-                (unit as f64 * m_per_unit) as f32
-            }
-        })
-        .collect();
-    DepthMap::new(Image::new(units.width(), units.height(), data).expect("same size"))
+    DepthMap::new(units.map(|unit| {
+        if unit == 0 {
+            f32::NAN
+        } else {
+            (unit as f64 * m_per_unit) as f32
+        }
+    }))
 }
 
 #[cfg(test)]

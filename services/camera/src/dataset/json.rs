@@ -3,10 +3,11 @@
 //! A [`JsonNode`] is a value together with its file and its JSON pointer (`/7/cam_K`); its
 //! accessors check type and range and say which key failed and why. Writing goes through
 //! [`bop_style_object`], which lays out a top-level map one entry a line, as the BOP toolkit
-//! does.
+//! does, or [`write_pretty_json`] for Glint's own files.
 
 use std::path::Path;
 
+use glint_geometry::io::write_file_atomically;
 use serde::Serialize;
 use serde_json::Value;
 
@@ -105,8 +106,13 @@ impl<'a> JsonNode<'a> {
         };
         match map.get(name) {
             Some(value) if !value.is_null() => Ok(self.child(name, value)),
-            _ => Err(self.child(name, &Value::Null).error("missing")),
+            _ => Err(self.missing(name)),
         }
+    }
+
+    /// The error for the member `name` of this object being missing (or `null`).
+    pub(crate) fn missing(&self, name: &str) -> DatasetError {
+        self.child(name, &Value::Null).error("missing")
     }
 
     /// The member `name` of an object, `None` if this is not an object or it is missing or
@@ -214,8 +220,12 @@ fn describe(value: &Value) -> String {
 }
 
 /// A top-level JSON object with one entry a line, keys in the iterator's order (the BOP
-/// toolkit's layout: diff-friendly, compact, and valid JSON for every reader).
-pub(crate) fn bop_style_object<K, V>(entries: impl IntoIterator<Item = (K, V)>) -> Vec<u8>
+/// toolkit's layout: diff-friendly, compact, and valid JSON for every reader). `path` is the
+/// file it is for, named in errors.
+pub(crate) fn bop_style_object<K, V>(
+    path: &Path,
+    entries: impl IntoIterator<Item = (K, V)>,
+) -> Result<Vec<u8>, DatasetError>
 where
     K: std::fmt::Display,
     V: Serialize,
@@ -227,12 +237,41 @@ where
             out.push_str(",\n");
         }
         first = false;
-        let key = serde_json::to_string(&key.to_string()).expect("a string serialises");
-        let value = serde_json::to_string(&value).expect("dataset records serialise to JSON");
+        let key = serde_json::to_string(&key.to_string()).map_err(json_encode_error(path))?;
+        let value = serde_json::to_string(&value).map_err(json_encode_error(path))?;
         out.push_str(&format!("  {key}: {value}"));
     }
     out.push_str("\n}\n");
-    out.into_bytes()
+    Ok(out.into_bytes())
+}
+
+/// Writes `entries` at `path` atomically as a [`bop_style_object`].
+pub(crate) fn write_bop_style_object<K, V>(
+    path: &Path,
+    entries: impl IntoIterator<Item = (K, V)>,
+) -> Result<(), DatasetError>
+where
+    K: std::fmt::Display,
+    V: Serialize,
+{
+    let bytes = bop_style_object(path, entries)?;
+    Ok(write_file_atomically(path, &bytes)?)
+}
+
+/// Writes `value` at `path` atomically as pretty-printed JSON with a final newline: the layout
+/// of Glint's own JSON files.
+pub(crate) fn write_pretty_json(path: &Path, value: &impl Serialize) -> Result<(), DatasetError> {
+    let mut bytes = serde_json::to_vec_pretty(value).map_err(json_encode_error(path))?;
+    bytes.push(b'\n');
+    Ok(write_file_atomically(path, &bytes)?)
+}
+
+/// The error of encoding the contents of the file at `path` as JSON.
+pub(crate) fn json_encode_error(path: &Path) -> impl Fn(serde_json::Error) -> DatasetError + '_ {
+    |source| DatasetError::JsonEncode {
+        path: path.to_owned(),
+        source,
+    }
 }
 
 #[cfg(test)]
@@ -295,15 +334,21 @@ mod tests {
 
     #[test]
     fn bop_style_objects_are_valid_json() {
-        let bytes = bop_style_object([
-            (1, serde_json::json!({"a": [1.5]})),
-            (10, serde_json::json!(2)),
-        ]);
+        let path = Path::new("o.json");
+        let bytes = bop_style_object(
+            path,
+            [
+                (1, serde_json::json!({"a": [1.5]})),
+                (10, serde_json::json!(2)),
+            ],
+        )
+        .unwrap();
         let text = String::from_utf8(bytes).unwrap();
         assert_eq!(text, "{\n  \"1\": {\"a\":[1.5]},\n  \"10\": 2\n}\n");
         let parsed: Value = serde_json::from_str(&text).unwrap();
         assert_eq!(parsed["10"], 2);
-        let empty = String::from_utf8(bop_style_object(Vec::<(u32, u32)>::new())).unwrap();
+        let empty =
+            String::from_utf8(bop_style_object(path, Vec::<(u32, u32)>::new()).unwrap()).unwrap();
         assert!(
             serde_json::from_str::<Value>(&empty)
                 .unwrap()

@@ -16,12 +16,11 @@
 
 use std::path::Path;
 
-use glint_geometry::io::write_file_atomically;
 use glint_render::bsdf::{PARAMETER_COUNT, PrincipledParams};
 use serde_json::json;
 
 use super::error::DatasetError;
-use super::json::{JsonNode, read_json_file};
+use super::json::{JsonNode, read_json_file, write_pretty_json};
 use crate::bin::BinSpec;
 
 /// The reference surface: the bin and its known material.
@@ -51,9 +50,7 @@ pub fn write_reference_surface_json(
         },
         "material": material,
     });
-    let mut bytes = serde_json::to_vec_pretty(&value).expect("JSON values serialise");
-    bytes.push(b'\n');
-    Ok(write_file_atomically(path, &bytes)?)
+    write_pretty_json(path, &value)
 }
 
 /// Reads a `reference_surface.json`; errors name the file and the key (a missing parameter,

@@ -22,14 +22,13 @@
 use std::path::Path;
 
 use glint_geometry::camera::{PinholeIntrinsics, StereoRig};
-use glint_geometry::io::write_file_atomically;
 use glint_render::rig::SliRig;
 use glint_render::sensor::Sensor;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use serde_json::json;
 
 use super::error::DatasetError;
-use super::json::{JsonNode, read_json_as, read_json_file};
+use super::json::{JsonNode, json_encode_error, read_json_as, read_json_file, write_pretty_json};
 
 /// What `pixel_convention` says in `rig.json`.
 pub const GLINT_PIXEL_CONVENTION: &str = "pixel (u, v) has its centre at (u + 0.5, v + 0.5); \
@@ -38,8 +37,9 @@ pub const GLINT_PIXEL_CONVENTION: &str = "pixel (u, v) has its centre at (u + 0.
 /// Largest |‖q‖ − 1| accepted for a quaternion read from `rig.json`.
 const QUATERNION_NORM_TOLERANCE: f64 = 1e-6;
 
-fn intrinsics_json(k: &PinholeIntrinsics) -> serde_json::Value {
-    serde_json::to_value(k).expect("intrinsics serialise")
+/// `k` as a JSON value for the file at `path`.
+fn intrinsics_json(path: &Path, k: &PinholeIntrinsics) -> Result<serde_json::Value, DatasetError> {
+    serde_json::to_value(k).map_err(json_encode_error(path))
 }
 
 fn pose_json(t: &Isometry3<f64>) -> serde_json::Value {
@@ -52,18 +52,18 @@ fn pose_json(t: &Isometry3<f64>) -> serde_json::Value {
 
 /// Writes `rig` as `rig.json` at `path`, atomically.
 pub fn write_rig_json(path: &Path, rig: &SliRig) -> Result<(), DatasetError> {
+    let left_intrinsics = intrinsics_json(path, &rig.stereo.intrinsics)?;
+    let projector_intrinsics = intrinsics_json(path, &rig.projector_intrinsics)?;
     let value = json!({
         "pixel_convention": GLINT_PIXEL_CONVENTION,
-        "left_intrinsics": intrinsics_json(&rig.stereo.intrinsics),
+        "left_intrinsics": left_intrinsics,
         "baseline_m": rig.stereo.baseline_m,
         "t_left_right": pose_json(&Isometry3::translation(rig.stereo.baseline_m, 0.0, 0.0)),
         "t_left_projector": pose_json(&rig.t_left_projector),
-        "projector_intrinsics": intrinsics_json(&rig.projector_intrinsics),
+        "projector_intrinsics": projector_intrinsics,
         "projector_intensity_w_per_sr": rig.projector_intensity_w_per_sr,
     });
-    let mut bytes = serde_json::to_vec_pretty(&value).expect("JSON values serialise");
-    bytes.push(b'\n');
-    Ok(write_file_atomically(path, &bytes)?)
+    write_pretty_json(path, &value)
 }
 
 fn parse_intrinsics(node: &JsonNode<'_>) -> Result<PinholeIntrinsics, DatasetError> {
@@ -121,9 +121,7 @@ pub fn read_rig_json(path: &Path) -> Result<SliRig, DatasetError> {
 
 /// Writes the ground-truth sensor as `gt_sensor.json` at `path`, atomically.
 pub fn write_gt_sensor_json(path: &Path, sensor: &Sensor) -> Result<(), DatasetError> {
-    let mut bytes = serde_json::to_vec_pretty(sensor).expect("a sensor serialises");
-    bytes.push(b'\n');
-    Ok(write_file_atomically(path, &bytes)?)
+    write_pretty_json(path, sensor)
 }
 
 /// Reads a `gt_sensor.json` (for evaluating a calibration against the truth).

@@ -3,12 +3,11 @@
 use std::path::Path;
 
 use glint_geometry::camera::PinholeIntrinsics;
-use glint_geometry::io::write_file_atomically;
 use nalgebra::Isometry3;
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::error::DatasetError;
-use crate::dataset::json::{JsonNode, read_json_file};
+use crate::dataset::json::{JsonNode, read_json_file, write_pretty_json};
 use crate::dataset::transforms::{isometry_from_rotation_and_mm, rotation_and_mm_from_isometry};
 
 /// Offset from BOP's (OpenCV's) principal point to Glint's: Glint's pixel centres sit at
@@ -128,8 +127,8 @@ impl UnsizedCamera {
                 let t_mm = t_node.f64_array::<3>()?;
                 Some(isometry_from_rotation_and_mm(&r, &t_mm).map_err(|p| r_node.error(p))?)
             }
-            (Some(_), None) => return Err(entry.field("cam_t_w2c").unwrap_err()),
-            (None, Some(_)) => return Err(entry.field("cam_R_w2c").unwrap_err()),
+            (Some(_), None) => return Err(entry.missing("cam_t_w2c")),
+            (None, Some(_)) => return Err(entry.missing("cam_R_w2c")),
         };
         Ok(Self {
             fx_px,
@@ -205,7 +204,5 @@ pub fn write_dataset_camera(path: &Path, camera: &BopCamera) -> Result<(), Datas
     if let Some(scale) = camera.depth_scale_mm {
         record["depth_scale"] = scale.into();
     }
-    let mut bytes = serde_json::to_vec_pretty(&record).expect("JSON values serialise");
-    bytes.push(b'\n');
-    Ok(write_file_atomically(path, &bytes)?)
+    write_pretty_json(path, &record)
 }

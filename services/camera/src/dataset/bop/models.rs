@@ -4,7 +4,7 @@
 use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 
-use glint_geometry::io::{LoadedMesh, PlyEncoding, read_mesh, write_file_atomically, write_ply};
+use glint_geometry::io::{LoadedMesh, PlyEncoding, read_mesh, write_ply};
 use glint_geometry::symmetry::Axis;
 use glint_geometry::{LengthUnit, Symmetry, TriMesh};
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::dataset::error::{DatasetError, create_directory};
-use crate::dataset::json::{JsonNode, bop_style_object, read_json_file};
+use crate::dataset::json::{JsonNode, read_json_file, write_bop_style_object};
 use crate::dataset::transforms::{MM_PER_M, isometry_from_matrix4_mm, matrix4_mm_from_isometry};
 
 /// Meshes with at most this many distinct vertices get their exact diameter (all pairs,
@@ -337,23 +337,24 @@ pub fn write_models(
             LengthUnit::Millimetre,
             PlyEncoding::BinaryLittleEndian,
         )?;
+        let bbox = ModelBox {
+            min_m: min.coords.cast(),
+            size_m: (max - min).cast(),
+        };
         let info = ModelInfo {
             diameter_m: mesh_diameter_m(mesh),
-            bbox: Some(ModelBox {
-                min_m: min.coords.cast(),
-                size_m: (max - min).cast(),
-            }),
+            bbox: Some(bbox),
             symmetry: ModelSymmetry::from_glint(symmetry),
         };
-        entries.insert(obj_id, model_info_entry(&info, symmetry));
+        entries.insert(obj_id, model_info_entry(&info, &bbox, symmetry));
         infos.push(info);
     }
-    write_file_atomically(&info_path, &bop_style_object(entries))?;
+    write_bop_style_object(&info_path, entries)?;
     Ok(infos)
 }
 
-fn model_info_entry(info: &ModelInfo, symmetry: &Symmetry) -> ModelInfoEntry {
-    let bbox = info.bbox.expect("written models have a box");
+/// The `models_info.json` entry of `info`, whose box is `bbox` (every written model has one).
+fn model_info_entry(info: &ModelInfo, bbox: &ModelBox, symmetry: &Symmetry) -> ModelInfoEntry {
     let (min, size) = (bbox.min_m * MM_PER_M, bbox.size_m * MM_PER_M);
     ModelInfoEntry {
         diameter: info.diameter_m * MM_PER_M,

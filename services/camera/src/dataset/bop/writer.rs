@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 
 use glint_geometry::camera::PinholeIntrinsics;
 use glint_geometry::image::{DepthMap, Image};
-use glint_geometry::io::write_file_atomically;
 use nalgebra::Isometry3;
 
 use super::camera::{BopCamera, SceneCameraEntry};
@@ -13,7 +12,7 @@ use super::gt::{BopGt, BopGtInfo, GtInfoEntry, SceneGtEntry};
 use super::{BopSceneLayout, MaskKind};
 use crate::dataset::error::{DatasetError, create_directory};
 use crate::dataset::image_files::{depth_to_units, write_png_u8, write_png_u16};
-use crate::dataset::json::bop_style_object;
+use crate::dataset::json::{write_bop_style_object, write_pretty_json};
 use crate::dataset::{PatternImage, StereoSide};
 
 /// Writes one BOP scene directory (`<split>/XXXXXX/`).
@@ -216,12 +215,7 @@ impl BopSceneWriter {
             }
         }
         for &(label, gt_index) in gt_index_of_label {
-            let data = labels
-                .data()
-                .iter()
-                .map(|&l| if l == label { 255 } else { 0 })
-                .collect();
-            let mask = Image::new(labels.width(), labels.height(), data).expect("same size");
+            let mask = labels.map(|l| if l == label { 255u8 } else { 0 });
             self.write_mask(im_id, gt_index, kind, &mask)?;
         }
         Ok(())
@@ -287,22 +281,14 @@ impl BopSceneWriter {
                 });
             }
         }
-        write_file_atomically(
-            &layout.scene_camera_json(),
-            &bop_style_object(&self.cameras),
-        )?;
-        write_file_atomically(&gt_path, &bop_style_object(&self.gts))?;
+        write_bop_style_object(&layout.scene_camera_json(), &self.cameras)?;
+        write_bop_style_object(&gt_path, &self.gts)?;
         if !self.gt_infos.is_empty() {
-            write_file_atomically(
-                &layout.scene_gt_info_json(),
-                &bop_style_object(&self.gt_infos),
-            )?;
+            write_bop_style_object(&layout.scene_gt_info_json(), &self.gt_infos)?;
         }
         if let Some(materials) = &self.gt_materials {
             create_directory(&layout.glint_dir())?;
-            let mut bytes = serde_json::to_vec_pretty(materials).expect("JSON values serialise");
-            bytes.push(b'\n');
-            write_file_atomically(&layout.gt_materials_json(), &bytes)?;
+            write_pretty_json(&layout.gt_materials_json(), materials)?;
         }
         Ok(self.layout.scene_dir().to_owned())
     }
