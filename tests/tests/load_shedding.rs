@@ -9,7 +9,7 @@ use glint_e2e::TestServer;
 use glint_proto::v1;
 use glint_proto::v1::calibration_service_client::CalibrationServiceClient;
 use glint_server::HealthStatus;
-use glint_server::load::{CallLimits, RETRY_PUSHBACK_KEY};
+use glint_server::load::{CallLimits, retry_pushback};
 use glint_server::security::{ClientSecurity, ServerSecurity};
 use tokio_stream::wrappers::ReceiverStream;
 
@@ -99,15 +99,7 @@ async fn a_server_at_its_bound_refuses_at_once_and_admits_again_when_a_place_fre
         }
     };
     assert!(refused.message().contains(SERVICE_NAME), "{refused:?}");
-    assert_eq!(
-        refused
-            .metadata()
-            .get(RETRY_PUSHBACK_KEY)
-            .unwrap()
-            .to_str()
-            .unwrap(),
-        "250"
-    );
+    assert_eq!(retry_pushback(&refused), Some(Duration::from_millis(250)));
     let refused_in = Instant::now();
     let again = client
         .calibrate_response(tokio_stream::iter([bad_header()]))

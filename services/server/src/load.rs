@@ -117,15 +117,32 @@ fn service_of(path: &str) -> &str {
 
 /// RESOURCE_EXHAUSTED for a call refused by `service`'s bound, with the retry pushback.
 pub fn refusal(service: &str, bound: usize, retry_after: Duration) -> tonic::Status {
-    let ms = retry_after.as_millis();
-    let mut status = tonic::Status::resource_exhausted(format!(
+    let status = tonic::Status::resource_exhausted(format!(
         "{service}: {bound} calls at work already, its bound (--max-concurrent-calls); retry \
-         in {ms} ms"
+         in {} ms",
+        retry_after.as_millis()
     ));
-    if let Ok(value) = ms.to_string().parse() {
+    with_retry_pushback(status, retry_after)
+}
+
+/// `status` carrying gRPC's retry pushback: the client should wait `after` before trying again.
+pub fn with_retry_pushback(mut status: tonic::Status, after: Duration) -> tonic::Status {
+    if let Ok(value) = after.as_millis().to_string().parse() {
         status.metadata_mut().insert(RETRY_PUSHBACK_KEY, value);
     }
     status
+}
+
+/// The retry pushback `status` carries, if any (whole milliseconds).
+pub fn retry_pushback(status: &tonic::Status) -> Option<Duration> {
+    let ms: u64 = status
+        .metadata()
+        .get(RETRY_PUSHBACK_KEY)?
+        .to_str()
+        .ok()?
+        .parse()
+        .ok()?;
+    Some(Duration::from_millis(ms))
 }
 
 type BoxFuture<T> = Pin<Box<dyn std::future::Future<Output = T> + Send>>;
@@ -217,14 +234,10 @@ mod tests {
         let status = refusal("glint.v1.EstimationService", 3, Duration::from_millis(250));
         assert_eq!(status.code(), tonic::Code::ResourceExhausted);
         assert!(status.message().contains("glint.v1.EstimationService"));
+        assert_eq!(retry_pushback(&status), Some(Duration::from_millis(250)));
         assert_eq!(
-            status
-                .metadata()
-                .get(RETRY_PUSHBACK_KEY)
-                .unwrap()
-                .to_str()
-                .unwrap(),
-            "250"
+            retry_pushback(&tonic::Status::resource_exhausted("no hint")),
+            None
         );
     }
 }

@@ -10,7 +10,6 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use glint_client::{MockSession, PreparedSession, channel, prepare_mock_session};
 use glint_geometry::Part;
-use glint_orchestrator::remote::RETRY_PUSHBACK_KEY;
 use glint_orchestrator::session::ViewPolicy;
 use glint_proto::v1;
 use glint_proto::v1::orchestrator_service_client::OrchestratorServiceClient;
@@ -115,11 +114,9 @@ async fn one_session(
         {
             Ok(stream) => break stream.into_inner(),
             Err(s) if s.code() == tonic::Code::ResourceExhausted => {
-                let wait_ms = s
-                    .metadata()
-                    .get(RETRY_PUSHBACK_KEY)
-                    .and_then(|v| v.to_str().ok()?.parse::<u64>().ok())
-                    .context("a refusal without grpc-retry-pushback-ms")?;
+                let wait_ms = glint_server::load::retry_pushback(&s)
+                    .context("a refusal without grpc-retry-pushback-ms")?
+                    .as_millis() as u64;
                 if let Ok(mut t) = tally.lock() {
                     t.refused += 1;
                 }

@@ -92,6 +92,7 @@ pub fn when_admitted<T>(
 /// What a failed call means to a session. INVALID_ARGUMENT messages start with the field
 /// (`field: message`, as every Glint server writes them).
 pub use glint_server::load::RETRY_PUSHBACK_KEY;
+use glint_server::load::{retry_pushback, with_retry_pushback};
 
 /// The wait after a RESOURCE_EXHAUSTED that names none, ms.
 const DEFAULT_RETRY_AFTER_MS: u64 = 500;
@@ -108,11 +109,8 @@ pub fn stage_error(status: &tonic::Status) -> StageError {
         // A stage at its bound of calls: wait its retry hint and try again.
         Code::ResourceExhausted => StageError::Overloaded {
             message,
-            retry_after_ms: status
-                .metadata()
-                .get(RETRY_PUSHBACK_KEY)
-                .and_then(|v| v.to_str().ok()?.parse().ok())
-                .unwrap_or(DEFAULT_RETRY_AFTER_MS),
+            retry_after_ms: retry_pushback(status)
+                .map_or(DEFAULT_RETRY_AFTER_MS, |d| d.as_millis() as u64),
         },
         Code::Unavailable | Code::DeadlineExceeded | Code::Aborted => {
             StageError::Unavailable(format!("{}: {message}", status.code()))
@@ -131,14 +129,10 @@ pub fn status_of(error: &StageError) -> tonic::Status {
         StageError::FailedPrecondition(m) => tonic::Status::failed_precondition(m.clone()),
         StageError::Unavailable(m) => tonic::Status::unavailable(m.clone()),
         StageError::Cancelled => tonic::Status::cancelled("cancelled"),
-        StageError::Overloaded { retry_after_ms, .. } => {
-            // gRPC's retry pushback: clients wait this long before trying again.
-            let mut status = tonic::Status::resource_exhausted(error.to_string());
-            if let Ok(value) = retry_after_ms.to_string().parse() {
-                status.metadata_mut().insert(RETRY_PUSHBACK_KEY, value);
-            }
-            status
-        }
+        StageError::Overloaded { retry_after_ms, .. } => with_retry_pushback(
+            tonic::Status::resource_exhausted(error.to_string()),
+            Duration::from_millis(*retry_after_ms),
+        ),
         StageError::DataLoss(m) => tonic::Status::data_loss(m.clone()),
         StageError::Internal(m) => tonic::Status::internal(m.clone()),
     }
@@ -202,15 +196,7 @@ mod tests {
             retry_after_ms: 1000,
         });
         assert_eq!(status.code(), Code::ResourceExhausted);
-        assert_eq!(
-            status
-                .metadata()
-                .get(RETRY_PUSHBACK_KEY)
-                .unwrap()
-                .to_str()
-                .unwrap(),
-            "1000"
-        );
+        assert_eq!(retry_pushback(&status), Some(Duration::from_millis(1000)));
         // ... and back: an overloaded stage, with its retry hint.
         assert!(matches!(
             stage_error(&status),
