@@ -14,6 +14,7 @@
 //! Nothing here knows a stage's domain; nothing in a stage's library knows this crate.
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+#![warn(missing_docs)]
 
 pub mod load;
 pub mod process;
@@ -34,18 +35,34 @@ use tonic_health::pb::health_client::HealthClient;
 /// Why a server could not run or a health check failed.
 #[derive(Debug, thiserror::Error)]
 pub enum ServerError {
+    /// The listen address cannot be bound: it is in use, not an address of this host, or a
+    /// port that needs privileges; give another `--listen`.
     #[error("cannot listen on {addr}: {source}")]
     Bind {
+        /// The address as given (HOST:PORT).
         addr: String,
+        /// Why the operating system refused it.
         #[source]
         source: std::io::Error,
     },
+    /// The `glint.v1` and health file descriptors built into the binary cannot be served for
+    /// reflection: a broken build, not a setting.
     #[error("server reflection: {0}")]
     Reflection(#[from] tonic_reflection::server::Error),
+    /// The transport failed while serving (an I/O error on the listener, for instance); the
+    /// server has stopped.
     #[error("serving: {0}")]
     Transport(#[from] tonic::transport::Error),
+    /// `target` gave no health answer (no connection within the timeout, a refused connection,
+    /// an error status), or a child server could not start or ended before it printed its
+    /// address ([`process::ServerProcess::spawn`]).
     #[error("{target}: {problem}")]
-    Unhealthy { target: String, problem: String },
+    Unhealthy {
+        /// The server asked: its address, or a child server's command line.
+        target: String,
+        /// What went wrong, in words.
+        problem: String,
+    },
     /// A token or TLS file is unusable, or the TLS settings are refused.
     #[error("{0}")]
     Security(String),

@@ -33,6 +33,7 @@ pub const DEFAULT_RETRY_AFTER: Duration = Duration::from_millis(500);
 /// Calls at work per service at most: `glint.v1` service name → bound.
 #[derive(Clone, Debug, Default)]
 pub struct CallLimits {
+    /// `(service name, bound)` pairs; a service not listed is not limited.
     pub per_service: Vec<(&'static str, usize)>,
     /// The retry pushback of a refusal.
     pub retry_after: Duration,
@@ -68,6 +69,7 @@ pub struct CallLimitLayer {
 }
 
 impl CallLimitLayer {
+    /// The layer enforcing `limits`: each listed service counts its own calls at work.
     pub fn new(limits: &CallLimits) -> Self {
         let gates = limits
             .per_service

@@ -13,6 +13,7 @@ pub const LISTENING_PREFIX: &str = "listening on ";
 
 /// A running server process and the address it listens on.
 pub struct ServerProcess {
+    /// The server's process; dropping the [`ServerProcess`] kills it.
     pub child: Child,
     /// HOST:PORT, as the server printed it.
     pub addr: String,

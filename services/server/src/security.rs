@@ -99,12 +99,18 @@ impl Token {
 /// must chain to.
 #[derive(Clone, Debug)]
 pub struct ServerTls {
+    /// The server's certificate chain, PEM.
     pub cert_pem: Vec<u8>,
+    /// The server's private key, PEM.
     pub key_pem: Vec<u8>,
+    /// The CA (PEM) every client's certificate must chain to; `None`: no client certificate
+    /// asked for.
     pub client_ca_pem: Option<Vec<u8>>,
 }
 
 impl ServerTls {
+    /// Reads the PEM files given as `--tls-cert`, `--tls-key` and, for mutual TLS,
+    /// `--tls-client-ca`.
     pub fn from_files(
         cert: &Path,
         key: &Path,
@@ -130,7 +136,9 @@ impl ServerTls {
 /// How a server admits calls. Default: no token, no TLS.
 #[derive(Clone, Debug, Default)]
 pub struct ServerSecurity {
+    /// The token every call but health must carry; `None`: every caller is admitted.
     pub token: Option<Token>,
+    /// The server's TLS identity; `None`: plaintext HTTP/2.
     pub tls: Option<ServerTls>,
 }
 
@@ -138,19 +146,24 @@ pub struct ServerSecurity {
 /// optional client certificate, and the token.
 #[derive(Clone, Debug, Default)]
 pub struct ClientSecurity {
+    /// The token sent on every call; `None`: none is sent.
     pub token: Option<Token>,
+    /// The TLS settings; `None`: plaintext (`http://`).
     pub tls: Option<ClientTls>,
 }
 
 /// A client's TLS settings.
 #[derive(Clone, Debug)]
 pub struct ClientTls {
+    /// The CA certificate (PEM) the server's certificate must chain to.
     pub ca_pem: Vec<u8>,
     /// Certificate and key (PEM) to present, for servers that require client certificates.
     pub identity: Option<(Vec<u8>, Vec<u8>)>,
 }
 
 impl ClientTls {
+    /// Reads the CA given as `--tls-ca` and, for servers that require client certificates,
+    /// the certificate and key given as `--tls-cert` and `--tls-key` (both or neither).
     pub fn from_files(
         ca: &Path,
         cert: Option<&Path>,
@@ -246,6 +259,7 @@ pub struct BearerAuthLayer {
 }
 
 impl BearerAuthLayer {
+    /// The layer admitting calls that carry `token`; `None` admits every call.
     pub fn new(token: Option<Token>) -> Self {
         Self { token }
     }

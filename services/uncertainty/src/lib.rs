@@ -12,6 +12,7 @@
 //! - `server` (feature `server`): the gRPC server `glint.v1.UncertaintyService` over them.
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+#![warn(missing_docs)]
 
 pub mod predict;
 pub mod response;

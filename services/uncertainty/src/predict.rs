@@ -67,9 +67,11 @@ pub struct PredictorObject {
 /// A known surface of the scene that is not the part.
 #[derive(Clone, Debug)]
 pub struct KnownSurface {
+    /// The surface's mesh, metres, surface frame.
     pub mesh: Arc<TriMesh>,
     /// Surface → world.
     pub t_w_s: Isometry3<f64>,
+    /// Its material in the renders.
     pub material: PrincipledParams<f32>,
 }
 
@@ -80,12 +82,16 @@ pub enum SigmaModel {
     Rendered,
     /// Every part pixel both cameras see, with this σ_z (metres): visibility and Jacobians
     /// only — the paper's constant-σ baseline. One direct render per camera, for visibility.
-    Constant { sigma_z_m: f64 },
+    Constant {
+        /// σ_z of every kept pixel, metres.
+        sigma_z_m: f64,
+    },
 }
 
 /// How to predict.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PredictionSettings {
+    /// Rendered σ̌_z and missing pixels (the paper's method) or a constant σ_z.
     pub sigma: SigmaModel,
     /// τ_I of eq 16: missing where `I_single / I_multi` is below this.
     pub tau_intensity_ratio: f64,
@@ -139,13 +145,20 @@ impl Default for PredictionSettings {
 /// Why a prediction could not be made.
 #[derive(Debug, thiserror::Error)]
 pub enum PredictionError {
+    /// A setting or pose is out of range or not finite: `field` names it, `message` says what
+    /// it must be.
     #[error("{field}: {message}")]
     Input {
+        /// The setting or pose at fault, as named here (e.g. `tau_sigma_m`, `t_w_c`).
         field: &'static str,
+        /// What its value must be.
         message: String,
     },
+    /// The part and its surroundings make no scene to render, e.g. their meshes have no
+    /// triangles: register a mesh with faces.
     #[error("the object's scene: {0}")]
     Scene(#[from] SceneError),
+    /// σ̌_z (eq 1–5) refused the synthesised pattern images; with validated settings, a bug.
     #[error("σ̌_z: {0}")]
     Sigma(#[from] DepthSigmaError),
     /// A crop or image that does not fit: a bug, reported instead of a panic in a worker.
@@ -197,6 +210,7 @@ pub struct CandidatePrediction {
     /// The Fisher information the view would add (eq 21–22), in the refiner's δ coordinates
     /// (object frame, translation first).
     pub information: Matrix6<f64>,
+    /// What became of the part's left pixels (all zero when not in view).
     pub counts: MissingCounts,
     /// The part's projection is outside the candidate's image (or behind it).
     pub not_in_view: bool,
@@ -206,8 +220,11 @@ pub struct CandidatePrediction {
     pub sigma_z_m: Option<Image<f32>>,
     /// [`PixelCause`] per crop pixel, when asked.
     pub cause: Option<Image<u8>>,
+    /// Wall time of the scene build and the white renders, milliseconds.
     pub render_ms: f64,
+    /// Wall time of the missing-pixel tests and σ̌_z (eq 16–17, 1–5), milliseconds.
     pub sigma_ms: f64,
+    /// Wall time of the Fisher information (eq 21–22), milliseconds.
     pub information_ms: f64,
 }
 

@@ -8,6 +8,8 @@ use glint_calibration::response::ResponseTable;
 /// `s` the radiometric scale (relative exposure per second per W·sr⁻¹·m⁻²) and `Δt` seconds.
 #[derive(Clone, Debug)]
 pub struct CalibratedCamera {
+    /// The response g: intensity in [0, 1] of full scale against log relative exposure
+    /// (`glint calibrate response`).
     pub response: ResponseTable,
     /// Relative radiance-map units per W·sr⁻¹·m⁻², from the BSDF fit's reference surface.
     pub radiometric_scale: f64,
@@ -18,13 +20,19 @@ pub struct CalibratedCamera {
 /// Why a calibration cannot be used.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum CalibrationError {
+    /// The radiometric scale is zero, negative or not finite: take it from a successful BSDF
+    /// fit (`glint calibrate bsdf`).
     #[error("radiometric_scale is {0}; it must be finite and positive")]
     Scale(f64),
+    /// The exposure time is zero, negative or not finite: give the pattern captures' exposure
+    /// in seconds.
     #[error("exposure_s is {0}; it must be finite and positive (seconds)")]
     Exposure(f64),
 }
 
 impl CalibratedCamera {
+    /// The camera of `response` at `radiometric_scale` and `exposure_s` seconds, both checked
+    /// finite and positive.
     pub fn new(
         response: ResponseTable,
         radiometric_scale: f64,

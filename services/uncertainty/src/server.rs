@@ -51,6 +51,8 @@ pub const MAX_SURROUNDINGS: usize = 16;
 /// A registered object and what of the camera the predictions need beyond it.
 #[derive(Clone, Debug)]
 pub struct RegisteredObject {
+    /// What the predictions render: mesh, SDF grid, material, calibrated camera, rig, noise and
+    /// surroundings.
     pub object: PredictorObject,
     /// Pattern shots per capture (K).
     pub shots: u32,
@@ -276,14 +278,21 @@ pub fn noise_to_message(noise: &NoiseModel) -> v1::SensorNoiseModel {
 pub struct ObjectDescription<'a> {
     /// The part's name (logs only; not part of the key).
     pub name: &'a str,
+    /// The part's mesh, metres, object frame.
     pub mesh: &'a TriMesh,
+    /// The fitted material (`glint calibrate bsdf`).
     pub material: &'a PrincipledParams<f32>,
+    /// The calibrated response and radiometric scale.
     pub camera: &'a CalibratedCamera,
+    /// The camera rig and its projector.
     pub rig: &'a SliRig,
+    /// The sensor's intensity noise σ_I².
     pub noise: &'a NoiseModel,
+    /// Known static surfaces rendered with the part; empty: the part alone.
     pub surroundings: &'a [KnownSurface],
-    /// Pattern shots per capture (K) and the patterns' lit fraction.
+    /// Pattern shots per capture (K).
     pub shots: u32,
+    /// Fraction of lit projector pixels in the patterns.
     pub pattern_fill: f64,
 }
 
