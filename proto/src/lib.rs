@@ -13,6 +13,8 @@
 //! otherwise, `t_a_b` maps points from frame b to frame a, row-major images with pixel centres
 //! at `(u + 0.5, v + 0.5)`.
 
+#![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+
 pub mod chunks;
 pub mod convert;
 
