@@ -26,11 +26,15 @@ use std::path::Path;
 /// How the demo's bin is made.
 #[derive(Clone, Debug)]
 pub struct ActiveSceneSpec {
+    /// The part dropped into the bin.
     pub part: Part,
+    /// Number of parts dropped into the bin.
     pub instances: u32,
     /// Seed of the drop and of the detector's error.
     pub seed: u64,
+    /// Width of the mock camera's images, px.
     pub width_px: u32,
+    /// Height of the mock camera's images, px.
     pub height_px: u32,
     /// Samples per pixel of the mock camera's renders.
     pub samples_per_pixel: u32,
@@ -40,9 +44,13 @@ pub struct ActiveSceneSpec {
 
 /// The bin, the part to refine and the stand-in detector's guess.
 pub struct ActiveScene {
+    /// The mock camera over the dropped bin.
     pub camera: MockCamera,
+    /// The part as the session knows it: name and mesh (metres, object frame).
     pub object: SessionObject,
+    /// The part's symmetry, used to score pose errors.
     pub symmetry: Symmetry,
+    /// Candidate views `t_w_c` (left camera → world) on the cap above the bin.
     pub candidates: Vec<Isometry3<f64>>,
     /// The candidate the detector looked from (the session's first view).
     pub first_view: usize,

@@ -14,6 +14,7 @@
 //! estimates or predicts may depend on this crate.
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+#![warn(missing_docs)]
 
 pub mod active;
 pub mod capture_folder;

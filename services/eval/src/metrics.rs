@@ -18,8 +18,11 @@ use rand_distr::StandardNormal;
 /// run and not changed after.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct InitialPoseNoise {
+    /// σ_lat: standard deviation of the translation error along the camera's x and y, metres.
     pub lateral_sigma_m: f64,
+    /// σ_depth: standard deviation of the translation error along the camera's z, metres.
     pub depth_sigma_m: f64,
+    /// σ_rot: standard deviation of each component of the rotation error ω, radians.
     pub rotation_sigma_rad: f64,
 }
 
@@ -65,6 +68,7 @@ impl InitialPoseNoise {
         }
     }
 
+    /// A one-line description of the distribution for reports, in mm and degrees.
     pub fn describe(&self) -> String {
         format!(
             "translation N(0, diag({:.1}, {:.1}, {:.1}) mm) in the reference camera (x, y lateral, z depth); \

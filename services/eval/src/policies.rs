@@ -18,17 +18,25 @@ use crate::active::{
 /// What to compare.
 #[derive(Clone, Debug)]
 pub struct PolicyComparison {
+    /// The part dropped into every bin.
     pub part: Part,
     /// One bin per seed; disjoint from any seed used to choose settings.
     pub seeds: Vec<u64>,
+    /// The view policies compared, each run on every bin.
     pub policies: Vec<ViewPolicy>,
     /// Views per session (the first, the detector's, included).
     pub views: usize,
+    /// Candidate views on the cap above each bin; at least `views`.
     pub candidates: usize,
+    /// Parts per bin.
     pub instances: u32,
+    /// Width of the mock camera's images, px.
     pub width_px: u32,
+    /// Height of the mock camera's images, px.
     pub height_px: u32,
+    /// Samples per pixel of the mock camera's renders.
     pub samples_per_pixel: u32,
+    /// How the part's pixels are found in each view.
     pub masking: Masking,
     /// The render workers render the bin with the part (beyond the paper).
     pub predict_with_bin: bool,
@@ -37,18 +45,28 @@ pub struct PolicyComparison {
 /// One step of one session.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct StepRow {
+    /// Seed of the bin.
     pub seed: u64,
+    /// The view policy's name ([`ViewPolicy::name`]).
     pub policy: &'static str,
     /// Views taken after this step (1 = the detector's view only).
     pub views: usize,
+    /// Index into the candidates of the view taken at this step.
     pub view: usize,
+    /// Part points of all views taken so far.
     pub points: usize,
+    /// Translation error of the refined pose against the truth (symmetry-aware), mm.
     pub err_mm: f64,
+    /// Rotation error of the refined pose against the truth (symmetry-aware), degrees.
     pub err_deg: f64,
+    /// Pose entropy after this step (the planner's prior included), nats.
     pub entropy_nats: f64,
     /// The entropy the planner predicted for this view (entropy policies, after the first).
     pub predicted_entropy_nats: Option<f64>,
+    /// Time the step spent in the prediction stage, seconds.
     pub predict_s: f64,
+    /// Wall-clock time of the whole step, from the previous step's end (or the session's
+    /// start), seconds.
     pub step_s: f64,
 }
 

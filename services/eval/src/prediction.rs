@@ -24,18 +24,27 @@ use glint_orchestrator::local::MockCamera;
 /// What to measure.
 #[derive(Clone, Debug)]
 pub struct PredictionStudy {
+    /// The part dropped into every bin.
     pub part: Part,
+    /// One bin per seed (the seed of its drop).
     pub seeds: Vec<u64>,
+    /// Views per bin, on the cap above it; each is captured and predicted.
     pub views: usize,
+    /// Parts per bin.
     pub instances: u32,
+    /// Width of the mock camera's images, px.
     pub width_px: u32,
+    /// Height of the mock camera's images, px.
     pub height_px: u32,
+    /// Samples per pixel of the mock camera's renders.
     pub samples_per_pixel: u32,
     /// Instances with fewer visible pixels are skipped.
     pub min_visible_px: u64,
     /// Capture depth within this of the true surface is usable, metres.
     pub good_depth_m: f64,
+    /// The τ_I tried (eq 16): missing where `I_single / I_multi` is below it.
     pub tau_intensity_ratios: Vec<f64>,
+    /// The τ_σ tried (eq 17), metres: missing where σ̌_z is above it.
     pub tau_sigmas_m: Vec<f64>,
     /// Render the bin with the part.
     pub with_bin: bool,
@@ -44,12 +53,17 @@ pub struct PredictionStudy {
 /// Pixel counts of one threshold pair, summed over everything measured.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Confusion {
+    /// τ_I of eq 16.
     pub tau_intensity_ratio: f64,
+    /// τ_σ of eq 17, metres.
     pub tau_sigma_m: f64,
     /// Usable in the capture and kept by the prediction.
     pub true_usable: u64,
+    /// Lost in the capture but kept by the prediction.
     pub false_usable: u64,
+    /// Lost in the capture and dropped by the prediction.
     pub true_missing: u64,
+    /// Usable in the capture but dropped by the prediction.
     pub false_missing: u64,
 }
 

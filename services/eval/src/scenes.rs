@@ -26,9 +26,13 @@ use nalgebra::Isometry3;
 /// ground-truth material the mock camera paints it with.
 #[derive(Clone, Debug)]
 pub struct EvalObject {
+    /// The object's name: its directory under the scene cache's root.
     pub name: String,
+    /// The mesh, metres, in the object's frame.
     pub mesh: TriMesh,
+    /// The object's symmetry, used to score pose errors.
     pub symmetry: Symmetry,
+    /// The ground-truth material the mock camera renders the object with.
     pub material: PrincipledParams<f32>,
 }
 
@@ -42,13 +46,19 @@ pub struct SceneSpec {
     pub window_radius_px: u32,
     /// Patterns projected per view (the space-time matcher matches over all of them).
     pub shots: u32,
+    /// Parts per bin.
     pub instances: u32,
+    /// Views captured per bin, on the cap above it.
     pub views: u32,
+    /// Width of the mock camera's images, px.
     pub width_px: u32,
+    /// Height of the mock camera's images, px.
     pub height_px: u32,
+    /// Samples per pixel of the mock camera's renders.
     pub spp: u32,
 }
 
+/// The BOP object id the scenes give their object.
 pub const OBJ_ID: u32 = 1;
 /// The BOP scene holding one bin.
 const SCENE: &str = "000001";
@@ -165,26 +175,32 @@ fn generate(
 /// One object instance seen in one view: its depth points (world frame) and ground truth.
 #[derive(Clone, Debug)]
 pub struct InstanceView {
-    /// Index into [`LoadedScene::instances`].
+    /// The instance's number in the scene, the same in every view: instances are numbered in
+    /// the order first seen, and matched across views by their world pose.
     pub instance: usize,
     /// Ground truth, evaluation only.
     pub t_c_o_gt: Isometry3<f64>,
+    /// Share of the instance's silhouette visible in the view (BOP's `visib_fract`).
     pub visib_fract: f64,
+    /// Depth points of the instance's visible mask, world frame, each with its σ_z (eq 1–7).
     pub points: Vec<DepthPoint>,
 }
 
 /// One image of a scene.
 #[derive(Clone, Debug)]
 pub struct LoadedView {
+    /// The BOP image id.
     pub im_id: u32,
     /// Camera → world.
     pub t_w_c: Isometry3<f64>,
+    /// The `obj_id` instances annotated in this view.
     pub objects: Vec<InstanceView>,
 }
 
 /// A static scene read back: its views, with instances numbered across views.
 #[derive(Clone, Debug)]
 pub struct LoadedScene {
+    /// The scene's images, in BOP image-id order.
     pub views: Vec<LoadedView>,
 }
 

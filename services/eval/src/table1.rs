@@ -32,7 +32,9 @@ pub struct RefineExperiment {
     pub parts: Vec<Part>,
     /// Run on this mesh (PLY/OBJ/STL, in `unit`) with `symmetry` instead of the parts.
     pub mesh: Option<PathBuf>,
+    /// Length unit of `mesh`'s file.
     pub unit: LengthUnit,
+    /// Symmetry of `mesh`, used to score pose errors.
     pub symmetry: Symmetry,
     /// Bins (scenes) per part.
     pub scenes: u32,
@@ -42,6 +44,8 @@ pub struct RefineExperiment {
     pub views: Vec<u32>,
     /// Parts per bin.
     pub instances: u32,
+    /// Base seed: evaluation scenes use `seed·10⁴ + s`, tuning scenes `seed·10⁴ + 5000 + s`;
+    /// it also seeds the initial poses, the views drawn per trial and ICP's model sampling.
     pub seed: u64,
     /// Camera resolution, px.
     pub resolution: (u32, u32),
@@ -77,6 +81,7 @@ pub enum RefineMethod {
 }
 
 impl RefineMethod {
+    /// Every method, in the order of Table I's rows.
     pub const ALL: [Self; 3] = [Self::Initial, Self::Sdf, Self::Icp];
 
     /// The name in the output files.
@@ -102,6 +107,7 @@ pub struct Trial {
     t_c_o_init: Isometry3<f64>,
 }
 
+/// One method's result on one trial: its pose, its error against the truth, its cost.
 #[derive(Clone, Debug)]
 pub struct Outcome {
     method: RefineMethod,

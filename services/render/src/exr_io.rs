@@ -13,31 +13,60 @@ use glint_geometry::image::Image as GlintImage;
 /// Why an EXR could not be written or read.
 #[derive(Debug, thiserror::Error)]
 pub enum ExrError {
+    /// [`write_exr`] was given an empty channel list.
     #[error("{path}: no channels to write")]
-    NoChannels { path: String },
+    NoChannels {
+        /// The file, as displayed.
+        path: String,
+    },
+    /// A channel passed to [`write_exr`] is not the size of the first one.
     #[error(
         "{path}: channel {name:?} is {width}×{height} px but {first:?} is {first_width}×{first_height} px"
     )]
     SizeMismatch {
+        /// The file, as displayed.
         path: String,
+        /// Name of the mis-sized channel.
         name: String,
+        /// Its width, px.
         width: u32,
+        /// Its height, px.
         height: u32,
+        /// Name of the first channel, whose size all must share.
         first: String,
+        /// Width of the first channel, px.
         first_width: u32,
+        /// Height of the first channel, px.
         first_height: u32,
     },
+    /// A channel name passed to [`write_exr`] is empty or used twice.
     #[error("{path}: channel name {name:?} is empty or repeated")]
-    BadName { path: String, name: String },
+    BadName {
+        /// The file, as displayed.
+        path: String,
+        /// The offending name.
+        name: String,
+    },
+    /// The `exr` crate failed to encode or to open and decode the file.
     #[error("{path}: {source}")]
     Exr {
+        /// The file, as displayed.
         path: String,
+        /// The `exr` crate's error.
         source: exr::error::Error,
     },
+    /// The encoded bytes could not be written to the file atomically.
     #[error(transparent)]
     Write(#[from] glint_geometry::io::AtomicWriteError),
+    /// A decoded channel could not be turned into an image (e.g. its sample count does not
+    /// match the layer size).
     #[error("{path}: {problem}")]
-    Read { path: String, problem: String },
+    Read {
+        /// The file, as displayed.
+        path: String,
+        /// What went wrong.
+        problem: String,
+    },
 }
 
 /// Writes `channels` (name, image), all the same size, to `path` atomically.

@@ -35,7 +35,9 @@ pub enum LightTransport {
     SinglePath,
     /// Direct and inter-reflected light, up to `max_bounces` surface interactions.
     MultiPath {
+        /// Most surface interactions per path (0 is treated as 1).
         max_bounces: u32,
+        /// Number of surface interactions after which Russian roulette may end a path.
         roulette_after: u32,
         /// Roughness floor of every vertex after the first (0: exact, as the camera renders).
         min_indirect_roughness: f32,
@@ -71,11 +73,13 @@ impl LightTransport {
 /// How to render.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSettings {
+    /// Which light paths to follow.
     pub transport: LightTransport,
     /// Samples per pixel (≥ 1). One sample goes through the pixel centre; more are jittered.
     pub samples_per_pixel: u32,
     /// Render only these pixels (others stay 0 / NaN); `None` for the full image.
     pub roi: Option<PixelRect>,
+    /// Seed of the random streams; a render is reproducible for a given seed.
     pub seed: u64,
 }
 
@@ -95,6 +99,7 @@ pub struct RenderOutput {
 /// A camera placed in the world.
 #[derive(Clone, Copy, Debug)]
 pub struct Camera {
+    /// Pinhole intrinsics (focal lengths and principal point in px, image size).
     pub intrinsics: PinholeIntrinsics,
     /// Camera → world.
     pub t_w_c: Isometry3<f64>,

@@ -4,6 +4,7 @@
 //! W·sr⁻¹·m⁻² for a projector intensity in W/sr.
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+#![warn(missing_docs)]
 
 pub mod bsdf;
 pub mod exr_io;

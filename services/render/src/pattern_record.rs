@@ -33,10 +33,11 @@ use crate::scene::Scene;
 /// under a fully lit pattern.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProjectorHit {
-    /// Continuous projector pixel coordinates of the lit vertex (pixel centres at +0.5), in
-    /// f32: within 2⁻²⁴ · 2048 ≈ 1.2e-4 px of the f64 coordinates a direct render uses, for
+    /// Continuous projector pixel column of the lit vertex (pixel centres at +0.5), in f32:
+    /// within 2⁻²⁴ · 2048 ≈ 1.2e-4 px of the f64 coordinate a direct render uses, for
     /// projectors up to 2048 px wide.
     pub u_px: f32,
+    /// Continuous projector pixel row of the lit vertex, same convention as `u_px`.
     pub v_px: f32,
     /// The term's radiance under transmittance 1, already divided by the samples per pixel,
     /// W·sr⁻¹·m⁻².

@@ -60,8 +60,9 @@ pub struct BilinearTaps {
     /// Row-major indices of the texels (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1),
     /// clamped to the texture.
     pub index: [u32; 4],
-    /// Fractional position between them.
+    /// Horizontal fractional position between them, in [0, 1).
     pub fx: f32,
+    /// Vertical fractional position between them, in [0, 1).
     pub fy: f32,
 }
 
@@ -119,7 +120,10 @@ pub struct Illumination {
 pub struct Projector {
     /// Projector → world.
     pub t_w_p: Isometry3<f64>,
+    /// Pinhole optics of the projector (focal lengths and principal point in px, image size):
+    /// the frustum patterns are mapped onto.
     pub intrinsics: PinholeIntrinsics,
+    /// What the projector shows.
     pub pattern: Pattern,
     /// Radiant intensity of a fully lit pattern pixel, W/sr.
     pub intensity_w_per_sr: f32,

@@ -13,6 +13,8 @@ use crate::projector::{Pattern, Projector};
 /// An SLI stereo camera with its projector.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SliRig {
+    /// The two cameras: shared intrinsics and the baseline, metres, of the right camera along
+    /// +x of the left.
     pub stereo: StereoRig,
     /// Projector → left camera.
     pub t_left_projector: Isometry3<f64>,

@@ -33,22 +33,35 @@ pub struct SceneInstance {
 /// Why a scene could not be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum SceneError {
+    /// An instance's mesh index is out of range.
     #[error("instance {instance} refers to mesh {mesh}, but the scene has {meshes} meshes")]
     NoSuchMesh {
+        /// Index of the instance.
         instance: usize,
+        /// The mesh index it gives.
         mesh: usize,
+        /// Number of meshes in the scene.
         meshes: usize,
     },
+    /// An instance's material index is out of range.
     #[error(
         "instance {instance} refers to material {material}, but the scene has {materials} materials"
     )]
     NoSuchMaterial {
+        /// Index of the instance.
         instance: usize,
+        /// The material index it gives.
         material: usize,
+        /// Number of materials in the scene.
         materials: usize,
     },
+    /// An instance has label 0, which masks reserve for the background.
     #[error("instance {instance} has label 0, which is reserved for the background")]
-    ReservedLabel { instance: usize },
+    ReservedLabel {
+        /// Index of the instance.
+        instance: usize,
+    },
+    /// The instances hold no triangle (no instance, or only empty meshes).
     #[error("the scene has no triangles")]
     Empty,
 }
@@ -231,6 +244,7 @@ impl Scene {
             .ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
     }
 
+    /// The instances, in the order given to [`Scene::build`] (a hit's `instance` indexes them).
     pub fn instances(&self) -> &[SceneInstance] {
         &self.instances
     }

@@ -13,10 +13,18 @@ pub enum ResponseCurve {
     /// `g(x) = x` (up to saturation).
     Linear,
     /// `g(x) = x^(1/γ)`.
-    Gamma { gamma: f32 },
+    Gamma {
+        /// Exponent γ > 0; γ > 1 brightens the darks.
+        gamma: f32,
+    },
     /// A film-like S-curve: `g(x) = ½ (1 + tanh(c·(x^(1/γ) − ½)) / tanh(c/2))`, monotone with
     /// g(0) = 0 and g(1) = 1; `contrast` c > 0 sets the steepness of the middle.
-    SCurve { gamma: f32, contrast: f32 },
+    SCurve {
+        /// Exponent γ > 0 applied before the S-curve.
+        gamma: f32,
+        /// Steepness c > 0 of the middle of the curve.
+        contrast: f32,
+    },
 }
 
 impl ResponseCurve {
@@ -62,6 +70,8 @@ pub struct Sensor {
     pub full_well_e: f32,
     /// Read noise, electrons RMS.
     pub read_noise_e: f32,
+    /// Camera response g from normalised exposure (electrons / full well) to normalised
+    /// intensity, before quantisation.
     pub response: ResponseCurve,
     /// Output bits per pixel (8 or 10 … 16).
     pub bit_depth: u8,

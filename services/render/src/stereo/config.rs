@@ -40,9 +40,11 @@ impl DisparityRange {
         Self::new(min_px, max_px)
     }
 
+    /// Smallest disparity searched, px.
     pub const fn min_px(&self) -> u32 {
         self.min_px
     }
+    /// Largest disparity searched, px.
     pub const fn max_px(&self) -> u32 {
         self.max_px
     }

@@ -34,6 +34,7 @@ pub enum MatchStatus {
 }
 
 impl MatchStatus {
+    /// Every status, in discriminant order (`ALL[s as usize] == s`).
     pub const ALL: [MatchStatus; 9] = [
         MatchStatus::Valid,
         MatchStatus::OutOfRoi,
@@ -46,6 +47,7 @@ impl MatchStatus {
         MatchStatus::Speckle,
     ];
 
+    /// Whether this is [`MatchStatus::Valid`].
     #[inline]
     pub const fn is_valid(self) -> bool {
         matches!(self, MatchStatus::Valid)
@@ -85,9 +87,11 @@ pub struct StereoResult {
 }
 
 impl StereoResult {
+    /// Image width, px.
     pub fn width(&self) -> u32 {
         self.disparity_px.width()
     }
+    /// Image height, px.
     pub fn height(&self) -> u32 {
         self.disparity_px.height()
     }
