@@ -26,29 +26,54 @@ use glint_geometry::image::{DepthMap, Image, SummedAreaTable};
 /// Why an uncertainty could not be computed.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum DepthSigmaError {
+    /// Two images that must match pixel for pixel (the noise model's two shots, a left and a
+    /// right shot, or the left image and the depth map) have different sizes; pass images
+    /// from the same capture and crop them alike.
     #[error("{what}: images are {a_w}×{a_h} and {b_w}×{b_h} px; they must be the same size")]
     SizeMismatch {
+        /// Which pair of images differs.
         what: &'static str,
+        /// Width of the first image, px.
         a_w: u32,
+        /// Height of the first image, px.
         a_h: u32,
+        /// Width of the second image, px.
         b_w: u32,
+        /// Height of the second image, px.
         b_h: u32,
     },
+    /// The capture has no left shot, or a different number of right and left shots; pass the
+    /// K pattern images of both cameras, in the same order.
     #[error(
         "a capture needs at least one shot and as many right as left shots; got {left} left \
          and {right} right"
     )]
-    ShotCount { left: usize, right: usize },
+    ShotCount {
+        /// Number of left shots given.
+        left: usize,
+        /// Number of right shots given.
+        right: usize,
+    },
+    /// Too few usable pixel pairs (finite, neither black nor saturated) to fit the noise model,
+    /// or no intensity bin got enough of them; shoot a lit scene without over-exposing it.
     #[error(
         "noise model: only {pixels} unsaturated pixel pairs with signal; two shots of a lit, \
          static scene are needed"
     )]
-    TooFewNoiseSamples { pixels: usize },
+    TooFewNoiseSamples {
+        /// Usable pixel pairs found.
+        pixels: usize,
+    },
+    /// The two noise-model shots differ by more than 0.2 of full scale RMS, far beyond sensor
+    /// noise: the scene, the lighting or the camera changed between them; shoot again.
     #[error(
         "noise model: the two shots differ by {rms:.3} of full scale RMS, far more than sensor \
          noise; did the scene or the camera move between them?"
     )]
-    ShotsDiffer { rms: f64 },
+    ShotsDiffer {
+        /// RMS difference of the two shots over the usable pixels, in full scale.
+        rms: f64,
+    },
 }
 
 /// The sensor's noise variance as a function of normalised intensity, σ_I²(I): a table over

@@ -129,43 +129,83 @@ impl IcpConfig {
 /// Why ICP could not produce a pose.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum IcpError {
+    /// The model was built from no surface samples; sample the mesh with `n > 0`.
     #[error("the ICP model has no surface samples")]
     EmptyModel,
+    /// A model sample has a non-finite position, or a normal that is zero or non-finite; fix
+    /// the mesh (degenerate or NaN triangles) or the samples given.
     #[error("ICP model sample {index} has a non-finite position or normal")]
-    NonFiniteModelSample { index: usize },
+    NonFiniteModelSample {
+        /// Index of the offending sample.
+        index: usize,
+    },
+    /// The k-d tree over the model samples could not be built; the message is the tree's.
     #[error("ICP model: {0}")]
     ModelTree(String),
+    /// A setting of [`IcpConfig`] is out of range: a distance or threshold that is not finite
+    /// and positive, or a zero iteration budget.
     #[error("invalid ICP config: {field} {reason}")]
-    InvalidConfig { field: &'static str, reason: String },
+    InvalidConfig {
+        /// Name of the offending [`IcpConfig`] field.
+        field: &'static str,
+        /// What the value must be, and the value given.
+        reason: String,
+    },
+    /// The point set is empty; the view gave no depth on the part.
     #[error("ICP got no points")]
     NoPoints,
+    /// Every point is non-finite (missing depth); the view gave no usable depth on the part.
     #[error("ICP got {count} points, none of them finite")]
-    NoFinitePoints { count: usize },
+    NoFinitePoints {
+        /// Number of points given.
+        count: usize,
+    },
+    /// The initial pose `t_o_w` has a NaN or infinite translation or rotation.
     #[error("the initial pose t_o_w is not finite")]
     NonFiniteInitialPose,
+    /// Too few points lie within the maximum correspondence distance of the model to fix a
+    /// pose: the initial pose is too far off, or the distance too small for it.
     #[error(
         "ICP iteration {iteration}: only {found} points within {max_distance_m} m of the model, \
          {method:?} needs at least {required}"
     )]
     TooFewCorrespondences {
+        /// Pose updates made before the failing correspondence search.
         iteration: usize,
+        /// Pairs found within the distance.
         found: usize,
+        /// Pairs the metric needs ([`IcpMethod::min_correspondences`]).
         required: usize,
+        /// The maximum correspondence distance, metres.
         max_distance_m: f64,
+        /// The metric used.
         method: IcpMethod,
     },
+    /// The matched pairs do not determine a pose update: the points are collinear or
+    /// coincident, the normal equations have no usable direction, or the sums are not finite.
     #[error(
         "ICP iteration {iteration}: the {found} matched pairs do not determine a pose \
          (collinear or coincident points, or non-finite sums)"
     )]
-    Degenerate { iteration: usize, found: usize },
+    Degenerate {
+        /// Pose updates made before the failing step.
+        iteration: usize,
+        /// Pairs matched in that step.
+        found: usize,
+    },
+    /// An update moved the points' centroid (object frame) farther than
+    /// [`IcpConfig::max_displacement_m`] from where the initial pose put it, or made the pose
+    /// non-finite: the initial pose is too far off for the data.
     #[error(
         "ICP diverged at iteration {iteration}: the points moved {displacement_m} m from where \
          the initial pose put them (limit {max_displacement_m} m)"
     )]
     Diverged {
+        /// Pose updates made, counting the one that diverged.
         iteration: usize,
+        /// Distance the centroid moved, metres (+∞ for a non-finite pose).
         displacement_m: f64,
+        /// The limit, metres.
         max_displacement_m: f64,
     },
 }

@@ -14,6 +14,7 @@
 //! `T ← exp(δ)·T` with δ = (ρ, φ). Nothing here reads ground truth.
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+#![warn(missing_docs)]
 
 pub mod depth_sigma;
 pub mod icp;

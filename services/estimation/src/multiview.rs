@@ -33,7 +33,10 @@ pub enum RefineSigma {
     /// is fitted from each view's noise shots.
     PatternImages,
     /// The same σ_z for every point, metres (an unweighted refinement).
-    Constant { sigma_z_m: f64 },
+    Constant {
+        /// The σ_z, metres.
+        sigma_z_m: f64,
+    },
 }
 
 /// How the estimator finds the part's pixels and weighs them.
@@ -51,6 +54,7 @@ pub struct RefineSettings {
     pub erode_px: u32,
     /// The matcher's window radius, px (eq 2–3 sum over it).
     pub window_radius_px: u32,
+    /// Which depth σ the points are weighed with.
     pub sigma: RefineSigma,
 }
 
@@ -62,13 +66,20 @@ pub struct Refinement {
     /// Fisher information of the pose (eq 18; zero when diverged) and its inverse (eq 19;
     /// `None` when singular).
     pub information: Matrix6<f64>,
+    /// The pose covariance, `information⁻¹` (eq 19), in the same coordinates; `None` when
+    /// the information is singular or the refinement diverged.
     pub covariance: Option<Matrix6<f64>>,
     /// Depth points of the part per view, in view order.
     pub view_points: Vec<usize>,
+    /// Points with whitened residual within `inlier_k` at the solution, over all views.
     pub inliers: usize,
+    /// Gauss–Newton/LM iterations of the last pass.
     pub iterations: usize,
     /// "converged", "max_iterations" or "diverged".
     pub status: String,
+    /// Robust (Huber) cost at the solution of the last pass (see [`RefineResult::final_cost`]).
+    ///
+    /// [`RefineResult::final_cost`]: crate::refine::RefineResult::final_cost
     pub final_cost: f64,
     /// Time the refinement took, milliseconds.
     pub refine_ms: f64,
@@ -79,11 +90,18 @@ pub struct Refinement {
 pub enum MultiviewError {
     /// A setting or a view is wrong: fix `field` (`mask_margin_m`, `views[1].depth`).
     #[error("{field}: {message}")]
-    Input { field: String, message: String },
+    Input {
+        /// The offending setting or view field, e.g. `views[1].depth`.
+        field: String,
+        /// What is wrong with it.
+        message: String,
+    },
     /// A view's σ_z cannot be computed from its images (e.g. its noise shots differ).
     #[error("views[{view}]: σ_z: {source}")]
     Sigma {
+        /// Index of the view in `views`.
         view: usize,
+        /// Why its σ_z failed.
         #[source]
         source: DepthSigmaError,
     },

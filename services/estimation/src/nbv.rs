@@ -57,21 +57,42 @@ impl PosePrior {
 /// Why a plan could not be made.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum NbvError {
+    /// A σ of the [`PosePrior`] is zero, negative or not finite.
     #[error("the pose prior's σ must be finite and positive")]
     BadPrior,
+    /// An information matrix has a non-finite entry or is not symmetric to within 1e-9 of its
+    /// largest entry (see [`check_symmetric`]).
     #[error("information matrix {which} is not finite and symmetric")]
-    NotSymmetric { which: String },
+    NotSymmetric {
+        /// Which matrix: `information`, `collected` or `candidates[i]`.
+        which: String,
+    },
+    /// An information matrix has a negative direction, or its sum with the prior (and the
+    /// collected information) is not positive definite.
     #[error(
         "information matrix {which} is not positive semi-definite: with the prior added its \
          Cholesky factorisation fails"
     )]
-    NotPositive { which: String },
+    NotPositive {
+        /// Which matrix: `information` or `candidates[i]`.
+        which: String,
+    },
+    /// The candidate list is empty.
     #[error("there are no candidate views")]
     NoCandidates,
+    /// A taken view's index is not that of a candidate.
     #[error("taken view {index} is not a candidate (there are {candidates})")]
-    TakenOutOfRange { index: usize, candidates: usize },
+    TakenOutOfRange {
+        /// The offending index.
+        index: usize,
+        /// Number of candidates.
+        candidates: usize,
+    },
+    /// Every candidate view is already taken: there is nothing left to plan.
     #[error("every candidate view has been taken")]
     AllTaken,
+    /// The Max-Distance policy was asked for a view before any was taken; take the first
+    /// view another way.
     #[error("no view has been taken yet: the max-distance policy measures from the views taken")]
     NoViewTaken,
 }

@@ -115,7 +115,9 @@ pub enum RefineStatus {
 pub struct RefineResult {
     /// The refined pose, world → object.
     pub t_o_w: Isometry3<f64>,
+    /// How the refinement ended; a [`RefineStatus::Diverged`] pose is not an estimate.
     pub status: RefineStatus,
+    /// Gauss–Newton/LM iterations made, over all gate stages (≤ `max_iterations`).
     pub iterations: usize,
     /// Σ ρ(r/σ) at the solution (Huber cost, truncated at the final gate).
     pub final_cost: f64,
@@ -139,23 +141,45 @@ pub struct RefineResult {
 /// Why a refinement could not run.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum RefineError {
+    /// No depth points were given: the object's mask has no valid depth in any view.
     #[error("no depth points: the object's mask has no valid depth in any view")]
     NoPoints,
+    /// A point's position `p_w` or its ray derivative `∂p_w/∂z` is not finite; drop NaN
+    /// depth before refining.
     #[error("point {index} is not finite (p_w = {p_w:?}); drop NaN depth before refining")]
-    NonFinitePoint { index: usize, p_w: [f64; 3] },
+    NonFinitePoint {
+        /// Index of the point in the input.
+        index: usize,
+        /// Its world-frame position, metres.
+        p_w: [f64; 3],
+    },
+    /// A point's σ_z is zero, negative or not finite; give every point a finite, positive
+    /// depth σ (metres).
     #[error("point {index} has σ_z = {sigma} m; it must be finite and positive")]
-    BadSigma { index: usize, sigma: f64 },
+    BadSigma {
+        /// Index of the point in the input.
+        index: usize,
+        /// Its σ_z, metres.
+        sigma: f64,
+    },
+    /// The initial pose `t_o_w` has a NaN or infinite translation or rotation.
     #[error("the initial pose is not finite")]
     NonFiniteInitialPose,
+    /// Fewer than `min_inliers` points lie within the first gate of the model's surface at the
+    /// initial pose: the pose is off by more than the gate, or the points are not the object's.
     #[error(
         "only {inliers} of {points} points lie within {gate_mm} mm of the model's surface at \
          the initial pose (at least {needed} are needed): is the initial pose within the SDF \
          grid's padding, and are the points the object's?"
     )]
     TooFewInliers {
+        /// Points within the gate.
         inliers: usize,
+        /// Points tested (the coarse subset when the first stage uses one).
         points: usize,
+        /// The first stage's gate, [`SdfRefineConfig::gate_m`] in mm.
         gate_mm: f64,
+        /// [`SdfRefineConfig::min_inliers`].
         needed: usize,
     },
 }

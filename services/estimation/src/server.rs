@@ -59,8 +59,10 @@ pub const MAX_REFINE_BYTES: u64 = 2 << 30;
 pub const ARRAY_DEPTH: &str = "depth";
 /// The two read-outs of one static shot for the noise model (σ_I), with pattern-image σ.
 pub const ARRAY_NOISE: [&str; 2] = ["noise_a", "noise_b"];
-/// Prefixes of pattern shot `k`'s left and right images: `left_000`, `right_000`, ...
+/// Prefix of pattern shot `k`'s left image: `left_000`, `left_001`, ... (see
+/// [`shot_array_name`]).
 pub const ARRAY_LEFT_PREFIX: &str = "left_";
+/// Prefix of pattern shot `k`'s right image: `right_000`, `right_001`, ...
 pub const ARRAY_RIGHT_PREFIX: &str = "right_";
 
 /// The name of the left (`camera` 0) or right (1) image of pattern shot `k`.
@@ -78,6 +80,7 @@ pub fn shot_array_name(camera: usize, k: usize) -> String {
 pub struct RegisteredMesh {
     /// Metres, object frame.
     pub mesh: Arc<TriMesh>,
+    /// The mesh's SDF grid (object frame, metres), built with the service's [`SdfConfig`].
     pub grid: Arc<SdfGrid>,
 }
 
@@ -112,7 +115,9 @@ impl Registry {
 #[derive(Clone, Debug)]
 pub struct Estimation {
     registry: Arc<Mutex<Registry>>,
+    /// The refiner's configuration for `Refine`.
     pub refine: SdfRefineConfig,
+    /// The pose prior of `PlanNextView`, `PoseEntropy` and the entropy `Refine` reports.
     pub prior: PosePrior,
     /// The SDF grids of registered meshes: the refiner's voxel.
     pub sdf: SdfConfig,
@@ -349,10 +354,13 @@ pub fn refinement_from_message(m: &v1::RefineResponse) -> Result<Refinement, Con
 /// What a refinement's header says.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DecodedHeader {
+    /// The registered mesh's key: its content hash, 64 lowercase hexadecimal characters.
     pub mesh_sha256_hex: String,
     /// The hypothesis, object → world.
     pub t_w_o: Isometry3<f64>,
+    /// How to mask and weigh the views, validated.
     pub settings: RefineSettings,
+    /// Views the stream carries, 1 to [`MAX_VIEWS`].
     pub views: u32,
 }
 

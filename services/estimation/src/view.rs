@@ -23,6 +23,7 @@ pub struct ViewMeasurement {
     pub depth: DepthMap,
     /// The K pattern shots, left and right, as read out (digital numbers, response encoded).
     pub left: Vec<Image<u16>>,
+    /// The right camera's K pattern shots, in the same order as `left`.
     pub right: Vec<Image<u16>>,
     /// Two more read-outs of one static shot (σ_I's photon transfer), when the camera took them.
     pub noise_shots: Option<[Image<u16>; 2]>,
@@ -36,21 +37,32 @@ pub enum SigmaSource {
     /// From the view's pattern images by eq 1–5, with the matcher's window radius (px) and
     /// the sensor's noise model (fitted from the view's noise shots when `None`).
     PatternImages {
+        /// The matcher's window radius, px.
         window_radius_px: u32,
+        /// The sensor's noise model; `None` fits it from the view's noise shots.
         noise: Option<NoiseModel>,
     },
     /// One σ_z for every pixel, metres: an unweighted refinement.
-    Constant { sigma_z_m: f64 },
+    Constant {
+        /// The σ_z, metres.
+        sigma_z_m: f64,
+    },
 }
 
 /// Why a view gives no points.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum ViewError {
+    /// The view or its inputs do not fit together (a depth map, mask or σ image of another
+    /// size than the camera's, no noise shots for σ_z from pattern images, a bad constant σ_z).
     #[error("{field}: {message}")]
     Input {
+        /// The offending input: `depth`, `mask`, `sigma`, `noise_shots` or
+        /// `constant_sigma_z_m`.
         field: &'static str,
+        /// What is wrong with it.
         message: String,
     },
+    /// σ_z could not be computed from the view's images (see [`DepthSigmaError`]).
     #[error("σ_z: {0}")]
     Sigma(#[from] DepthSigmaError),
 }
@@ -65,7 +77,9 @@ fn input(field: &'static str, message: impl Into<String>) -> ViewError {
 /// What [`view_points`] found.
 #[derive(Clone, Debug)]
 pub struct ViewPoints {
+    /// The part's depth points, world frame, with σ_z.
     pub points: Vec<DepthPoint>,
+    /// What became of the mask's pixels; not updated by [`ViewPoints::drop_background`].
     pub counts: PointCounts,
 }
 
@@ -131,7 +145,10 @@ pub fn noise_model_of(view: &ViewMeasurement) -> Result<NoiseModel, ViewError> {
 /// the pose hypothesis, so a caller that masks the view more than once computes it once.
 #[derive(Clone, Debug)]
 pub enum ViewSigma {
+    /// σ_z of each pixel of the left depth, metres ([`depth_sigma`]: NaN where depth is
+    /// missing or the window leaves the image, +∞ where the window has no gradient).
     PerPixel(Image<f32>),
+    /// One σ_z for every pixel, metres.
     Constant(f64),
 }
 

@@ -9,23 +9,47 @@ use nalgebra::{Matrix3, Point2, Point3};
 /// Why camera parameters were rejected.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum CameraError {
+    /// The image width or height is zero or above 65535 px; pass a size within `1..=65535`.
     #[error("image size {width}×{height} px must be non-zero and at most 65535 on each side")]
-    BadSize { width: u32, height: u32 },
+    BadSize {
+        /// The rejected width, px.
+        width: u32,
+        /// The rejected height, px.
+        height: u32,
+    },
+    /// A focal length or the stereo baseline is zero, negative, NaN or infinite; it must be a
+    /// finite positive number.
     #[error("{field} = {value} must be finite and positive")]
-    NotPositive { field: &'static str, value: f64 },
+    NotPositive {
+        /// Name of the offending parameter (`fx_px`, `fy_px` or `baseline_m`).
+        field: &'static str,
+        /// The rejected value.
+        value: f64,
+    },
+    /// A principal-point coordinate is NaN or infinite; it must be a finite number.
     #[error("{field} = {value} must be finite")]
-    NotFinite { field: &'static str, value: f64 },
+    NotFinite {
+        /// Name of the offending parameter (`cx_px` or `cy_px`).
+        field: &'static str,
+        /// The rejected value.
+        value: f64,
+    },
 }
 
 /// Pinhole intrinsics, in pixels.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PinholeIntrinsics {
+    /// Image width, px.
     pub width_px: u32,
+    /// Image height, px.
     pub height_px: u32,
+    /// Focal length along x (columns), px.
     pub fx_px: f64,
+    /// Focal length along y (rows), px.
     pub fy_px: f64,
     /// Principal point in continuous pixel coordinates (the image centre is `width/2`).
     pub cx_px: f64,
+    /// Principal point's row coordinate, continuous px (the image centre is `height/2`).
     pub cy_px: f64,
 }
 
@@ -148,11 +172,15 @@ impl PinholeIntrinsics {
 /// `baseline_m` along +x of the left one, so disparity `d = u_L − u_R` and `z = f·b/d`.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StereoRig {
+    /// Intrinsics shared by the left and right cameras.
     pub intrinsics: PinholeIntrinsics,
+    /// Distance from the left to the right camera centre along the left camera's +x, metres.
     pub baseline_m: f64,
 }
 
 impl StereoRig {
+    /// A validated rig; fails with [`CameraError::NotPositive`] unless `baseline_m` is finite
+    /// and positive.
     pub fn new(intrinsics: PinholeIntrinsics, baseline_m: f64) -> Result<Self, CameraError> {
         if !(baseline_m.is_finite() && baseline_m > 0.0) {
             return Err(CameraError::NotPositive {

@@ -3,13 +3,24 @@
 /// Why an image buffer was rejected.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum ImageError {
+    /// The width or height is zero; an image needs at least one pixel.
     #[error("image size {width}×{height} px must be non-zero")]
-    ZeroSize { width: u32, height: u32 },
+    ZeroSize {
+        /// The requested width, px.
+        width: u32,
+        /// The requested height, px.
+        height: u32,
+    },
+    /// The buffer does not hold exactly `width × height` samples; check the size or the data.
     #[error("image of {width}×{height} px needs {expected} samples, got {actual}")]
     LengthMismatch {
+        /// The requested width, px.
         width: u32,
+        /// The requested height, px.
         height: u32,
+        /// Samples needed, `width × height`.
         expected: usize,
+        /// Samples supplied.
         actual: usize,
     },
 }
@@ -70,18 +81,23 @@ impl<T: Copy> Image<T> {
         }
     }
 
+    /// Width, px.
     pub fn width(&self) -> u32 {
         self.width
     }
+    /// Height, px.
     pub fn height(&self) -> u32 {
         self.height
     }
+    /// The samples, row-major: pixel `(u, v)` is at `v × width + u`.
     pub fn data(&self) -> &[T] {
         &self.data
     }
+    /// The samples, row-major, mutably.
     pub fn data_mut(&mut self) -> &mut [T] {
         &mut self.data
     }
+    /// The row-major sample buffer, consuming the image.
     pub fn into_data(self) -> Vec<T> {
         self.data
     }
@@ -219,10 +235,12 @@ impl SummedAreaTable {
 /// A depth map in metres along the optical axis (z, not ray length); NaN where depth is missing.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DepthMap {
+    /// Depth per pixel, metres; NaN or non-positive where missing.
     pub depth_m: Image<f32>,
 }
 
 impl DepthMap {
+    /// A depth map over `depth_m` (metres, NaN where missing).
     pub fn new(depth_m: Image<f32>) -> Self {
         Self { depth_m }
     }
@@ -318,13 +336,18 @@ mod tests {
 /// `(u + 0.5, v + 0.5)`), so the rectangle covers `[u_min, u_end) × [v_min, v_end)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct PixelRect {
+    /// First column.
     pub u_min: u32,
+    /// First row.
     pub v_min: u32,
+    /// Number of columns.
     pub width: u32,
+    /// Number of rows.
     pub height: u32,
 }
 
 impl PixelRect {
+    /// The rectangle of `width × height` pixels whose top-left pixel is `(u_min, v_min)`.
     pub const fn new(u_min: u32, v_min: u32, width: u32, height: u32) -> Self {
         Self {
             u_min,
@@ -356,6 +379,7 @@ impl PixelRect {
         self.v_min as u64 + self.height as u64
     }
 
+    /// Whether the rectangle holds no pixel (zero width or height).
     pub const fn is_empty(&self) -> bool {
         self.width == 0 || self.height == 0
     }

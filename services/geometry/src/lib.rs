@@ -9,6 +9,7 @@
 //! - meshes are `f32` (rendering precision), estimation is `f64`.
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+#![warn(missing_docs)]
 
 pub mod camera;
 pub mod glam_interop;

@@ -53,34 +53,61 @@ impl fmt::Display for LengthUnit {
 /// A mesh that cannot be used at all.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum MeshError {
+    /// The mesh has no vertices or no triangles; check that the file holds faces.
     #[error("the mesh is empty ({vertices} vertices, {triangles} triangles)")]
-    Empty { vertices: usize, triangles: usize },
+    Empty {
+        /// Number of vertices.
+        vertices: usize,
+        /// Number of triangles.
+        triangles: usize,
+    },
+    /// A vertex has a NaN or infinite coordinate; the file or the code that built the mesh is
+    /// corrupt.
     #[error("vertex {index} is not finite: ({x}, {y}, {z})")]
     NonFiniteVertex {
+        /// 0-based index of the first such vertex.
         index: usize,
+        /// Its x coordinate, metres.
         x: f32,
+        /// Its y coordinate, metres.
         y: f32,
+        /// Its z coordinate, metres.
         z: f32,
     },
+    /// A triangle refers to a vertex the mesh does not have.
     #[error(
         "triangle {triangle} refers to vertex {vertex}, but the mesh has only {vertex_count} vertices"
     )]
     IndexOutOfRange {
+        /// 0-based index of the first such triangle.
         triangle: usize,
+        /// The vertex index it holds.
         vertex: u32,
+        /// Number of vertices in the mesh.
         vertex_count: usize,
     },
+    /// Every triangle repeats a vertex or has (relative) zero area, so the mesh has no surface;
+    /// check the file's unit and contents.
     #[error("all {triangles} triangles are degenerate (repeated vertices or zero area)")]
-    AllDegenerate { triangles: usize },
+    AllDegenerate {
+        /// Number of triangles, all degenerate.
+        triangles: usize,
+    },
+    /// The use named by `purpose` needs a closed, consistently oriented surface and the mesh is
+    /// not one; repair the mesh (close holes, fix flipped faces) first.
     #[error(
         "the mesh is not watertight ({open_edges} open edges, {non_manifold_edges} non-manifold \
          edges, {inconsistent_edges} edges with flipped neighbours): {purpose} needs a closed, \
          consistently oriented surface"
     )]
     NotWatertight {
+        /// Edges used by exactly one triangle.
         open_edges: usize,
+        /// Edges used by three or more triangles.
         non_manifold_edges: usize,
+        /// Edges whose two triangles traverse them in the same direction.
         inconsistent_edges: usize,
+        /// What needed the watertight mesh.
         purpose: &'static str,
     },
 }
@@ -89,7 +116,9 @@ pub enum MeshError {
 /// the mesh (open edges, say) are counted here; [`MeshReport::warnings`] words them for a user.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MeshReport {
+    /// Number of vertices.
     pub vertices: usize,
+    /// Number of triangles, degenerate ones included.
     pub triangles: usize,
     /// Triangles with a repeated vertex or (relative) zero area.
     pub degenerate_triangles: usize,
@@ -103,8 +132,9 @@ pub struct MeshReport {
     pub components: usize,
     /// Signed enclosed volume, m³; negative when the faces point inwards.
     pub signed_volume_m3: f64,
-    /// Axis-aligned bounds, metres.
+    /// Axis-aligned bounds, metres: the minimum corner.
     pub aabb_min: Point3<f32>,
+    /// Axis-aligned bounds, metres: the maximum corner.
     pub aabb_max: Point3<f32>,
 }
 
@@ -165,7 +195,9 @@ impl MeshReport {
 /// An indexed triangle mesh, vertices in metres.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TriMesh {
+    /// Vertex positions in the mesh frame, metres.
     pub vertices: Vec<Point3<f32>>,
+    /// Triangles as indices into `vertices`, counter-clockwise seen from outside.
     pub triangles: Vec<[u32; 3]>,
 }
 
@@ -173,6 +205,8 @@ pub struct TriMesh {
 const DEGENERATE_RELATIVE_AREA: f32 = 1e-9;
 
 impl TriMesh {
+    /// A mesh of `vertices` (metres) and `triangles` (indices into `vertices`), unvalidated:
+    /// see [`TriMesh::validate`].
     pub fn new(vertices: Vec<Point3<f32>>, triangles: Vec<[u32; 3]>) -> Self {
         Self {
             vertices,

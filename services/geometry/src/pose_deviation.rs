@@ -15,9 +15,11 @@ pub struct PoseDeviation {
 }
 
 impl PoseDeviation {
+    /// The translation error in millimetres.
     pub fn translation_mm(&self) -> f64 {
         self.translation_m * 1e3
     }
+    /// The rotation error in degrees, in [0, 180].
     pub fn rotation_deg(&self) -> f64 {
         self.rotation_rad.to_degrees()
     }
@@ -30,7 +32,9 @@ impl PoseDeviation {
 /// A correct-detection threshold: a pose is correct within `translation_m` and `rotation_rad`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CorrectThreshold {
+    /// Translation threshold, metres; the error must be strictly below it.
     pub translation_m: f64,
+    /// Rotation threshold, radians; the error must be strictly below it.
     pub rotation_rad: f64,
     /// Short label, e.g. "5mm5deg".
     pub label: &'static str,

@@ -43,20 +43,29 @@ impl Default for SdfConfig {
 /// Why a grid could not be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum SdfError {
+    /// The mesh is unusable or not watertight; see the [`MeshError`] for what to repair.
     #[error(transparent)]
     Mesh(#[from] MeshError),
+    /// [`SdfConfig::voxel_size_m`] (the value, metres) is zero, negative, NaN or infinite.
     #[error("voxel size {0} m must be finite and positive")]
     BadVoxelSize(f64),
+    /// [`SdfConfig::padding_m`] (the value, metres) is negative, NaN or infinite.
     #[error("padding {0} m must be finite and non-negative")]
     BadPadding(f64),
+    /// The grid would have more than [`MAX_GRID_NODES`] nodes; use a larger voxel size or less
+    /// padding, and check the mesh's length unit.
     #[error(
         "a grid of {nx}×{ny}×{nz} nodes is over the limit of {limit} nodes: use a larger voxel \
          size or less padding (is the mesh unit right? a mm mesh read as metres is 1000× too big)"
     )]
     TooLarge {
+        /// Nodes along x.
         nx: usize,
+        /// Nodes along y.
         ny: usize,
+        /// Nodes along z.
         nz: usize,
+        /// The node limit, [`MAX_GRID_NODES`].
         limit: usize,
     },
 }

@@ -13,12 +13,16 @@ use nalgebra::{Rotation3, Unit, UnitQuaternion, Vector3};
 /// A coordinate axis of the object frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Axis {
+    /// The object frame's x axis.
     X,
+    /// The object frame's y axis.
     Y,
+    /// The object frame's z axis.
     Z,
 }
 
 impl Axis {
+    /// The axis as a unit vector in the object frame.
     pub fn unit(self) -> Unit<Vector3<f64>> {
         match self {
             Axis::X => Vector3::x_axis(),

@@ -19,6 +19,7 @@ pub struct AtomicWriteError {
     pub path: PathBuf,
     /// What went wrong, in words.
     pub step: String,
+    /// The I/O error behind the failure.
     #[source]
     pub source: io::Error,
 }

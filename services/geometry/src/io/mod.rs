@@ -91,14 +91,20 @@ pub enum Location {
     Byte(u64),
     /// Entry `index` (0-based) of a PLY element such as `vertex` or `face`, in a text body.
     ElementAtLine {
+        /// Name of the element, as declared in the header.
         element: String,
+        /// 0-based index of the entry within the element.
         index: usize,
+        /// 1-based line of the file where the entry is.
         line: usize,
     },
     /// Entry `index` (0-based) of a PLY element, in a binary body; `byte` is where it starts.
     ElementAtByte {
+        /// Name of the element, as declared in the header.
         element: String,
+        /// 0-based index of the entry within the element.
         index: usize,
+        /// 0-based byte offset in the file where the entry starts.
         byte: u64,
     },
 }
@@ -128,34 +134,52 @@ pub enum MeshIoError {
     /// The file could not be read at all (missing, no permission, ...).
     #[error("cannot read {file}")]
     Read {
+        /// The file's path, or the name given for in-memory data.
         file: String,
+        /// The I/O error from the operating system.
         #[source]
         source: std::io::Error,
     },
     /// Neither the extension nor the contents tell the format.
     #[error("{file}: unknown mesh format: {detail}; Glint reads .ply, .obj and .stl files")]
-    UnknownFormat { file: String, detail: String },
+    UnknownFormat {
+        /// The file's path, or the name given for in-memory data.
+        file: String,
+        /// Why neither told it: the unrecognised extension, or that there is none.
+        detail: String,
+    },
     /// The PLY header is malformed or declares something this reader cannot use.
     #[error("{file}: bad PLY header at {at}: expected {expected}, found {found}")]
     BadHeader {
+        /// The file's path, or the name given for in-memory data.
         file: String,
+        /// Where in the header.
         at: Location,
+        /// What the reader expected there.
         expected: String,
+        /// What the header holds there.
         found: String,
     },
     /// A value or keyword in the body is not what the format requires there.
     #[error("{file}: at {at}: expected {expected}, found {found}")]
     Parse {
+        /// The file's path, or the name given for in-memory data.
         file: String,
+        /// Where in the file.
         at: Location,
+        /// What the format requires there.
         expected: String,
+        /// What the file holds there.
         found: String,
     },
     /// The data ends before everything the file declares or began.
     #[error("{file}: the data ends early, at {at}: expected {expected}")]
     Truncated {
+        /// The file's path, or the name given for in-memory data.
         file: String,
+        /// Where the data ends.
         at: Location,
+        /// What was still to come.
         expected: String,
     },
     /// A face refers to a vertex the file does not have. `index` is as written in the file
@@ -164,15 +188,21 @@ pub enum MeshIoError {
         "{file}: at {at}: vertex index {index} is out of range: the file has {vertex_count} vertices"
     )]
     IndexOutOfRange {
+        /// The file's path, or the name given for in-memory data.
         file: String,
+        /// Where the face is.
         at: Location,
+        /// The vertex index as written in the file.
         index: i64,
+        /// Number of vertices the file has.
         vertex_count: usize,
     },
     /// The file parsed, but the mesh in it is unusable (empty, a non-finite vertex, ...).
     #[error("{file}: unusable mesh")]
     InvalidMesh {
+        /// The file's path, or the name given for in-memory data.
         file: String,
+        /// What is wrong with the mesh.
         #[source]
         source: MeshError,
     },
@@ -184,6 +214,7 @@ pub enum MeshIoError {
 /// A mesh read from a file: in metres, validated.
 #[derive(Clone, Debug)]
 pub struct LoadedMesh {
+    /// The mesh, in metres.
     pub mesh: TriMesh,
     /// What [`TriMesh::validate`] found in `mesh`.
     pub report: MeshReport,
