@@ -13,20 +13,24 @@ use glint_server::load::{CallLimits, retry_pushback};
 use glint_server::security::{ClientSecurity, ServerSecurity};
 use tokio_stream::wrappers::ReceiverStream;
 
-/// The header of a stack that declares no images and 0 bits: refused at once as
-/// INVALID_ARGUMENT by an admitted call.
-fn bad_header() -> v1::ExposureStackChunk {
+/// The header of a stack of two exposures that declares no images, `bit_depth` bits.
+fn header_only(bit_depth: u32) -> v1::ExposureStackChunk {
     v1::ExposureStackChunk {
         part: Some(v1::exposure_stack_chunk::Part::Header(
             v1::ExposureStackHeader {
                 exposures_s: vec![1e-3, 2e-3],
                 arrays: Vec::new(),
-                bit_depth: 0,
+                bit_depth,
                 lambda: 0.0,
                 samples: 0,
             },
         )),
     }
+}
+
+/// A header of 0 bits: refused at once as INVALID_ARGUMENT by an admitted call.
+fn bad_header() -> v1::ExposureStackChunk {
+    header_only(0)
 }
 
 type HeldCall =
@@ -38,17 +42,8 @@ async fn hold_a_place(
     client: &CalibrationServiceClient<tonic::transport::Channel>,
 ) -> (tokio::sync::mpsc::Sender<v1::ExposureStackChunk>, HeldCall) {
     let (hold, open_stream) = tokio::sync::mpsc::channel(4);
-    let header = v1::ExposureStackChunk {
-        part: Some(v1::exposure_stack_chunk::Part::Header(
-            v1::ExposureStackHeader {
-                exposures_s: vec![1e-3, 2e-3],
-                arrays: Vec::new(),
-                bit_depth: 8,
-                lambda: 0.0,
-                samples: 0,
-            },
-        )),
-    };
+    // Valid (8 bits), so the call reads on until its stream ends.
+    let header = header_only(8);
     hold.send(header).await.unwrap();
     let mut client = client.clone();
     let held = tokio::spawn(async move {

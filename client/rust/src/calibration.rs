@@ -131,9 +131,10 @@ pub fn exposure_stack_messages(
     .collect()
 }
 
-/// Calibrates `spec.part` through the calibration service at `addr`, or reads the calibration
-/// `cache` already holds. A new calibration records its capture in `cache.scene_dir()`
-/// (replacing what an interrupted run left), then writes the response and, last, the material.
+/// Calibrates `spec.part` through the calibration service at `addr` into `cache`: records the
+/// capture in `cache.scene_dir()` (replacing what an interrupted run left), then writes the
+/// response and, last, the material. Callers read a complete cache with
+/// [`CalibrationCache::load`] first; this calibrates anew whatever the cache holds.
 pub async fn calibrate_mock_part(
     addr: &str,
     security: &ClientSecurity,
@@ -141,9 +142,6 @@ pub async fn calibrate_mock_part(
     cache: &CalibrationCache,
     mut on_event: impl FnMut(CalibrationEvent<'_>),
 ) -> anyhow::Result<Calibration> {
-    if let Some(cached) = cache.load()? {
-        return Ok(cached);
-    }
     let scene_dir = cache.scene_dir();
     let (events_tx, mut events_rx) = tokio::sync::mpsc::unbounded_channel();
     let recording = {
