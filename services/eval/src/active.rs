@@ -17,7 +17,7 @@ use glint_orchestrator::stages::SessionObject;
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 
-use crate::metrics::InitialPoseNoise;
+use crate::initial_pose::InitialPoseNoise;
 use glint_orchestrator::session::{Cell, SessionConfig, ViewPolicy};
 use glint_orchestrator::stages::{CameraStage, PartCalibration, PredictionObject, calibrate_noise};
 use glint_uncertainty::predict::PixelCause;

@@ -3,7 +3,9 @@
 //!
 //! - [`scenes`]: mock-camera bins cached as BOP scenes, and the reader that turns a BOP scene
 //!   into per-view object points with σ_z (the refiner's input path, eq 1–7);
-//! - [`metrics`]: initial poses drawn like a template detector's, symmetry-aware NEES;
+//! - [`initial_pose`]: initial poses drawn like the paper's template detector, fitted to its
+//!   initial row of Table I;
+//! - [`metrics`]: symmetry-aware NEES;
 //! - [`table1`]: Table I, SDF refinement against ICP;
 //! - [`active`]: an active session on a mock bin (the demo's and the tests');
 //! - [`capture_folder`]: mock captures written as BOP folders, and calibration captures;
@@ -18,6 +20,7 @@
 
 pub mod active;
 pub mod capture_folder;
+pub mod initial_pose;
 pub mod metrics;
 pub mod policies;
 pub mod prediction;

@@ -20,7 +20,8 @@ use nalgebra::{Isometry3, Point3};
 use rand::SeedableRng;
 use rand::seq::IndexedRandom;
 
-use crate::metrics::{InitialPoseNoise, chi2_mean_band, nees};
+use crate::initial_pose::InitialPoseNoise;
+use crate::metrics::{chi2_mean_band, nees};
 use crate::scenes::{
     EvalObject, LoadedScene, OBJ_ID, SceneSpec, capture_config, ensure_scene, load_scene,
 };
