@@ -68,11 +68,45 @@ pub fn chi2_mean_band(k: usize, n: usize) -> (f64, f64) {
     (k - half, k + half)
 }
 
+/// McNemar's exact two-sided test of paired binary outcomes: with `b` pairs where only the
+/// first method is right and `c` where only the second is, the probability under "both are
+/// equally good" (each discordant pair a fair coin) of a split at least as uneven:
+/// `min(1, 2 · P(X ≤ min(b, c)))`, `X ~ Binomial(b + c, ½)`. 1 without discordant pairs.
+pub fn mcnemar_exact_p(b: usize, c: usize) -> f64 {
+    let n = b + c;
+    let k = b.min(c);
+    // P(X = i) by the recurrence C(n, i + 1) = C(n, i) (n − i) / (i + 1), in logs to stay
+    // finite for large n.
+    let ln_half_n = n as f64 * 0.5f64.ln();
+    let mut ln_term = ln_half_n; // i = 0
+    let mut tail = ln_term.exp();
+    for i in 0..k {
+        ln_term += ((n - i) as f64).ln() - ((i + 1) as f64).ln();
+        tail += ln_term.exp();
+    }
+    (2.0 * tail).min(1.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use glint_geometry::symmetry::Axis;
     use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn mcnemar_matches_the_binomial_by_hand() {
+        // No discordant pairs, or an even split: no evidence either way.
+        assert_eq!(mcnemar_exact_p(0, 0), 1.0);
+        assert_eq!(mcnemar_exact_p(5, 5), 1.0);
+        // 1 vs 9: 2 · (C(10,0) + C(10,1)) / 2¹⁰ = 22 / 1024.
+        assert!((mcnemar_exact_p(1, 9) - 22.0 / 1024.0).abs() < 1e-12);
+        assert_eq!(mcnemar_exact_p(9, 1), mcnemar_exact_p(1, 9));
+        // 0 vs 10: 2 / 1024.
+        assert!((mcnemar_exact_p(0, 10) - 2.0 / 1024.0).abs() < 1e-12);
+        // Large n stays finite and tiny: 0 vs 2000 is 2 · 2⁻²⁰⁰⁰, below f64's range → 0.
+        assert!(mcnemar_exact_p(0, 2000) < 1e-300);
+        assert!(mcnemar_exact_p(1000, 1100) > 0.01);
+    }
 
     #[test]
     fn the_closed_form_spin_is_no_worse_than_a_fine_search() {

@@ -1,6 +1,8 @@
 //! The paper's Table I on mock-camera data (`glint eval refine`): SDF refinement (ours)
-//! against ICP from the same initial poses and the same depth points; rates are counted over
-//! GT instances at least 80 % visible in the reference view. Evaluation only: reads ground
+//! against ICP (point-to-point, the paper's baseline, and point-to-plane) from the same initial
+//! poses and the same depth points; rates are counted over GT instances at least 80 % visible
+//! in the reference view, with paired McNemar tests and the share of trials each refiner leaves
+//! further from the truth than it started. Evaluation only: reads ground
 //! truth to draw initial poses and to score.
 
 use std::fmt::Write as _;
@@ -21,7 +23,7 @@ use rand::SeedableRng;
 use rand::seq::IndexedRandom;
 
 use crate::initial_pose::InitialPoseNoise;
-use crate::metrics::{chi2_mean_band, nees};
+use crate::metrics::{chi2_mean_band, mcnemar_exact_p, nees};
 use crate::scenes::{
     EvalObject, LoadedScene, OBJ_ID, SceneSpec, capture_config, ensure_scene, load_scene,
 };
@@ -77,13 +79,17 @@ pub enum RefineMethod {
     Initial,
     /// Uncertainty-weighted SDF refinement (ours, eq 8–11).
     Sdf,
-    /// The ICP baseline, point-to-point.
+    /// The ICP baseline, point-to-point (the paper's).
     Icp,
+    /// ICP, point-to-plane.
+    IcpPlane,
 }
 
 impl RefineMethod {
     /// Every method, in the order of Table I's rows.
-    pub const ALL: [Self; 3] = [Self::Initial, Self::Sdf, Self::Icp];
+    pub const ALL: [Self; 4] = [Self::Initial, Self::Sdf, Self::Icp, Self::IcpPlane];
+    /// The refiners (every method but the initial pose).
+    pub const REFINERS: [Self; 3] = [Self::Sdf, Self::Icp, Self::IcpPlane];
 
     /// The name in the output files.
     pub fn name(self) -> &'static str {
@@ -91,8 +97,34 @@ impl RefineMethod {
             Self::Initial => "initial",
             Self::Sdf => "sdf",
             Self::Icp => "icp",
+            Self::IcpPlane => "icp_plane",
         }
     }
+
+    /// The label in Table I's rows.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Initial => "initial pose",
+            Self::Sdf => "SDF (ours)",
+            Self::Icp => "ICP",
+            Self::IcpPlane => "ICP point-to-plane",
+        }
+    }
+
+    /// The ICP variant of this method, if it is one.
+    fn icp_method(self) -> Option<IcpMethod> {
+        match self {
+            Self::Icp => Some(IcpMethod::PointToPoint),
+            Self::IcpPlane => Some(IcpMethod::PointToPlane),
+            Self::Initial | Self::Sdf => None,
+        }
+    }
+}
+
+/// A pose's distance from the truth on the 5 mm/5° scale, `t / 5 mm + θ / 5°`: "further from
+/// the truth than it started" compares this before and after refinement.
+fn scaled_error(d: &PoseDeviation) -> f64 {
+    d.translation_mm() / 5.0 + d.rotation_deg() / 5.0
 }
 
 /// One refinement problem: an instance, a reference view, and the views whose points it gets.
@@ -213,11 +245,39 @@ struct Refiners {
     icp_model: IcpModel,
 }
 
+/// The ICP settings of each variant: point-to-point, point-to-plane.
+#[derive(Clone, Copy, Debug)]
+struct IcpConfigs {
+    point_to_point: IcpConfig,
+    point_to_plane: IcpConfig,
+}
+
+impl IcpConfigs {
+    /// Both variants at one max correspondence distance (metres).
+    fn at(distance_m: f64) -> Self {
+        let with = |method| IcpConfig {
+            max_correspondence_distance_m: distance_m,
+            ..IcpConfig::with_method(method)
+        };
+        Self {
+            point_to_point: with(IcpMethod::PointToPoint),
+            point_to_plane: with(IcpMethod::PointToPlane),
+        }
+    }
+
+    fn of(&self, method: IcpMethod) -> &IcpConfig {
+        match method {
+            IcpMethod::PointToPoint => &self.point_to_point,
+            IcpMethod::PointToPlane => &self.point_to_plane,
+        }
+    }
+}
+
 fn run_trial(
     trial: &Trial,
     scene: &LoadedScene,
     refiners: &Refiners,
-    icp_config: &IcpConfig,
+    icp_configs: &IcpConfigs,
     symmetry: &Symmetry,
     methods: &[RefineMethod],
 ) -> Vec<Outcome> {
@@ -257,10 +317,13 @@ fn run_trial(
                     Err(e) => outcome(method, t_o_w_init, 0, ms, format!("error: {e}"), None),
                 }
             }
-            RefineMethod::Icp => {
+            RefineMethod::Icp | RefineMethod::IcpPlane => {
                 let p_w: Vec<Point3<f64>> = points.iter().map(|p| p.p_w).collect();
+                let config = method
+                    .icp_method()
+                    .map_or(&icp_configs.point_to_point, |m| icp_configs.of(m));
                 let start = Instant::now();
-                let result = refine_icp(&refiners.icp_model, &p_w, &t_o_w_init, icp_config);
+                let result = refine_icp(&refiners.icp_model, &p_w, &t_o_w_init, config);
                 let ms = start.elapsed().as_secs_f64() * 1e3;
                 match result {
                     Ok(r) => {
@@ -366,9 +429,8 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
         });
     }
 
-    // 1. ICP's correspondence distance: its best 2 mm/2° rate (all parts, all view counts) on
-    //    the tuning scenes.
-    let mut tuning: Vec<(f64, usize, usize)> = Vec::new(); // (distance, hits 2/2, n)
+    // 1. Each ICP variant's correspondence distance: its best 2 mm/2° rate (all parts, all
+    //    view counts) on the tuning scenes.
     let mut tune_trials = Vec::new();
     for (index, object) in objects.iter().enumerate() {
         for s in 0..args.tune_scenes {
@@ -378,57 +440,64 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
         }
     }
     let bar = crate::progress::bar(tune_trials.len() as u64, "tune icp");
-    let mut per_distance = vec![(0usize, 0usize); args.icp_distances_mm.len()];
+    let icp_variants = [RefineMethod::Icp, RefineMethod::IcpPlane];
+    // Per distance: (hits 2/2, n) of each variant.
+    let mut per_distance = vec![[(0usize, 0usize); 2]; args.icp_distances_mm.len()];
     for &(index, seed, ref dir) in &tune_trials {
         let object = &objects[index];
         let scene = load_scene(dir, OBJ_ID, window_radius_px, erode_px)?;
         let trials = trials_of_scene(object, seed, &scene, &args.views, &noise, args.seed);
         for (d, acc) in args.icp_distances_mm.iter().zip(per_distance.iter_mut()) {
-            let config = IcpConfig {
-                max_correspondence_distance_m: d * 1e-3,
-                ..IcpConfig::with_method(IcpMethod::PointToPoint)
-            };
+            let configs = IcpConfigs::at(d * 1e-3);
             for t in &trials {
-                let o = run_trial(
+                let outcomes = run_trial(
                     t,
                     &scene,
                     &refiners[index],
-                    &config,
+                    &configs,
                     &object.symmetry,
-                    &[RefineMethod::Icp],
+                    &icp_variants,
                 );
-                acc.1 += 1;
-                if o[0].deviation.is_correct(&CorrectThreshold::MM2_DEG2) {
-                    acc.0 += 1;
+                for (o, counts) in outcomes.iter().zip(acc.iter_mut()) {
+                    counts.1 += 1;
+                    counts.0 += o.deviation.is_correct(&CorrectThreshold::MM2_DEG2) as usize;
                 }
             }
         }
         bar.inc(1);
     }
     bar.finish_and_clear();
-    for (d, (hits, n)) in args.icp_distances_mm.iter().zip(&per_distance) {
-        tuning.push((*d, *hits, *n));
-    }
-    // Ties go to the later (larger) distance: `max_by` keeps the last maximum.
-    let best = tuning
-        .iter()
-        .max_by(|a, b| {
-            (a.1 as f64 / a.2.max(1) as f64).total_cmp(&(b.1 as f64 / b.2.max(1) as f64))
-        })
-        .context("--icp-distances-mm: give at least one distance")?;
-    let icp_config = IcpConfig {
-        max_correspondence_distance_m: best.0 * 1e-3,
-        ..IcpConfig::with_method(IcpMethod::PointToPoint)
-    };
-    tracing::info!(
-        "ICP max correspondence distance: {} mm (tuning 2/2 rates: {})",
-        best.0,
-        tuning
+    let mut tunings = Vec::new();
+    for v in 0..icp_variants.len() {
+        let tuning: Vec<(f64, usize, usize)> = args
+            .icp_distances_mm
             .iter()
-            .map(|(d, h, n)| format!("{d} mm {:.3}", *h as f64 / (*n).max(1) as f64))
-            .collect::<Vec<_>>()
-            .join(", ")
-    );
+            .zip(&per_distance)
+            .map(|(d, acc)| (*d, acc[v].0, acc[v].1))
+            .collect();
+        // Ties go to the later (larger) distance: `max_by` keeps the last maximum.
+        let best = tuning
+            .iter()
+            .max_by(|a, b| {
+                (a.1 as f64 / a.2.max(1) as f64).total_cmp(&(b.1 as f64 / b.2.max(1) as f64))
+            })
+            .context("--icp-distances-mm: give at least one distance")?
+            .0;
+        tracing::info!(
+            "{} max correspondence distance: {best} mm (tuning 2/2 rates: {})",
+            icp_variants[v].label(),
+            tuning
+                .iter()
+                .map(|(d, h, n)| format!("{d} mm {:.3}", *h as f64 / (*n).max(1) as f64))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        tunings.push(IcpTuning { tuning, best });
+    }
+    let icp_configs = IcpConfigs {
+        point_to_point: IcpConfigs::at(tunings[0].best * 1e-3).point_to_point,
+        point_to_plane: IcpConfigs::at(tunings[1].best * 1e-3).point_to_plane,
+    };
 
     // 2. The evaluation.
     let mut all: Vec<(Trial, Vec<Outcome>)> = Vec::new();
@@ -443,7 +512,7 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
                     &trial,
                     &scene,
                     refiner,
-                    &icp_config,
+                    &icp_configs,
                     &object.symmetry,
                     &RefineMethod::ALL,
                 );
@@ -454,7 +523,14 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
         bar.finish_and_clear();
     }
 
-    write_outputs(args, &objects, &all, &noise, &tuning, best.0)
+    write_outputs(args, &objects, &all, &noise, &tunings)
+}
+
+/// One ICP variant's tuning: (distance mm, hits at 2/2, trials) per distance, and the chosen
+/// distance, mm.
+struct IcpTuning {
+    tuning: Vec<(f64, usize, usize)>,
+    best: f64,
 }
 
 fn write_outputs(
@@ -462,8 +538,7 @@ fn write_outputs(
     objects: &[EvalObject],
     all: &[(Trial, Vec<Outcome>)],
     noise: &InitialPoseNoise,
-    tuning: &[(f64, usize, usize)],
-    icp_distance_mm: f64,
+    tunings: &[IcpTuning],
 ) -> anyhow::Result<String> {
     let mut groups: Vec<String> = objects.iter().map(|o| o.name.clone()).collect();
     groups.push("all".into());
@@ -570,24 +645,21 @@ fn write_outputs(
         row("initial pose".into(), args.views[0], RefineMethod::Initial)
     )?;
     for &k in &args.views {
-        writeln!(
-            table,
-            "{}",
-            row(
-                format!("{k} view{} — SDF (ours)", if k > 1 { "s" } else { "" }),
-                k,
-                RefineMethod::Sdf
-            )
-        )?;
-        writeln!(
-            table,
-            "{}",
-            row(
-                format!("{k} view{} — ICP", if k > 1 { "s" } else { "" }),
-                k,
-                RefineMethod::Icp
-            )
-        )?;
+        for method in RefineMethod::REFINERS {
+            writeln!(
+                table,
+                "{}",
+                row(
+                    format!(
+                        "{k} view{} — {}",
+                        if k > 1 { "s" } else { "" },
+                        method.label()
+                    ),
+                    k,
+                    method
+                )
+            )?;
+        }
     }
     writeln!(table, "\nTrials per part and view count:")?;
     for g in &groups {
@@ -598,20 +670,121 @@ fn write_outputs(
             .collect();
         writeln!(table, "- {g}: {}", counts.join(", "))?;
     }
-    writeln!(
-        table,
-        "\nInitial poses: {}.\n\nICP: point-to-point, k-d tree over 50 000 area-uniform model samples, 30 iterations (the SDF \
-         refiner's budget); max correspondence distance {icp_distance_mm} mm, its best 2 mm/2° rate on {} separate tuning \
-         scene(s) per part over the grid {}.\n\nSDF refiner: {:?}.\n",
-        noise.describe(),
-        args.tune_scenes,
-        tuning
+    let tuning_text = |t: &IcpTuning| {
+        t.tuning
             .iter()
             .map(|(d, h, n)| format!("{d} mm → {:.1} %", 100.0 * *h as f64 / (*n).max(1) as f64))
             .collect::<Vec<_>>()
-            .join(", "),
+            .join(", ")
+    };
+    writeln!(
+        table,
+        "\nInitial poses: {}.\n\nICP: k-d tree over 50 000 area-uniform model samples, 30 iterations (the SDF \
+         refiner's budget); each variant's max correspondence distance is its best 2 mm/2° rate on {} separate tuning \
+         scene(s) per part: point-to-point {} mm ({}), point-to-plane {} mm ({}).\n\nSDF refiner: {:?}.\n",
+        noise.describe(),
+        args.tune_scenes,
+        tunings[0].best,
+        tuning_text(&tunings[0]),
+        tunings[1].best,
+        tuning_text(&tunings[1]),
         SdfRefineConfig::default()
     )?;
+
+    // Paired comparison: the same trials, so McNemar's exact test on the discordant pairs.
+    writeln!(
+        table,
+        "## SDF against ICP, paired\n\nOn the same trials (same initial pose, same points): b = trials SDF gets right and \
+         the ICP variant wrong, c = the reverse; p = McNemar's exact two-sided test (binomial on b + c).\n\n\
+         | part | views | threshold | vs | n | SDF | ICP | b | c | p |\n|---|---:|---|---|---:|---:|---:|---:|---:|---:|"
+    )?;
+    let mut paired_csv =
+        String::from("part,views,threshold,baseline,n,sdf_rate,baseline_rate,b,c,p\n");
+    for g in &groups {
+        for &k in &args.views {
+            let sdf = select(g, k, RefineMethod::Sdf);
+            for baseline in [RefineMethod::Icp, RefineMethod::IcpPlane] {
+                let other = select(g, k, baseline);
+                for threshold in [CorrectThreshold::MM5_DEG5, CorrectThreshold::MM2_DEG2] {
+                    let (mut b, mut c, mut ours, mut theirs) = (0, 0, 0, 0);
+                    for (x, y) in sdf.iter().zip(&other) {
+                        let (p, q) = (
+                            x.deviation.is_correct(&threshold),
+                            y.deviation.is_correct(&threshold),
+                        );
+                        ours += p as usize;
+                        theirs += q as usize;
+                        b += (p && !q) as usize;
+                        c += (!p && q) as usize;
+                    }
+                    let n = sdf.len().min(other.len());
+                    let pct = |x: usize| 100.0 * x as f64 / n.max(1) as f64;
+                    let p = mcnemar_exact_p(b, c);
+                    writeln!(
+                        table,
+                        "| {g} | {k} | {} | {} | {n} | {:.1} | {:.1} | {b} | {c} | {p:.3} |",
+                        threshold.label,
+                        baseline.label(),
+                        pct(ours),
+                        pct(theirs)
+                    )?;
+                    writeln!(
+                        paired_csv,
+                        "{g},{k},{},{},{n},{:.4},{:.4},{b},{c},{p:.5}",
+                        threshold.label,
+                        baseline.name(),
+                        pct(ours) / 100.0,
+                        pct(theirs) / 100.0
+                    )?;
+                }
+            }
+        }
+    }
+
+    // A refiner should not make a start worse.
+    writeln!(
+        table,
+        "\n## Further from the truth than it started\n\nShare of trials (%) whose refined pose is further from the truth \
+         than the initial pose, by `t / 5 mm + θ / 5°`; in brackets, among the trials that started correct at 5 mm/5°.\n\n\
+         | part | views | SDF (ours) | ICP | ICP point-to-plane |\n|---|---:|---:|---:|---:|"
+    )?;
+    let mut worse_csv = String::from("part,views,method,n,worse,n_good_start,worse_good_start\n");
+    for g in &groups {
+        for &k in &args.views {
+            let mut line = format!("| {g} | {k} |");
+            for method in RefineMethod::REFINERS {
+                let (mut n, mut worse, mut good, mut worse_good) = (0, 0, 0, 0);
+                for (_, outcomes) in all
+                    .iter()
+                    .filter(|(t, _)| (g == "all" || &t.object == g) && t.views.len() == k as usize)
+                {
+                    let initial = outcomes.iter().find(|o| o.method == RefineMethod::Initial);
+                    let refined = outcomes.iter().find(|o| o.method == method);
+                    if let (Some(i), Some(r)) = (initial, refined) {
+                        let got_worse = scaled_error(&r.deviation) > scaled_error(&i.deviation);
+                        n += 1;
+                        worse += got_worse as usize;
+                        if i.deviation.is_correct(&CorrectThreshold::MM5_DEG5) {
+                            good += 1;
+                            worse_good += got_worse as usize;
+                        }
+                    }
+                }
+                line += &format!(
+                    " {:.1} ({:.1}) |",
+                    100.0 * worse as f64 / n.max(1) as f64,
+                    100.0 * worse_good as f64 / good.max(1) as f64
+                );
+                writeln!(
+                    worse_csv,
+                    "{g},{k},{},{n},{worse},{good},{worse_good}",
+                    method.name()
+                )?;
+            }
+            writeln!(table, "{line}")?;
+        }
+    }
+    writeln!(table)?;
 
     // Is the covariance honest? Mean NEES of SDF results that are correct at 5 mm/5°.
     writeln!(
@@ -648,7 +821,7 @@ fn write_outputs(
             )?;
         }
     }
-    let timing: Vec<String> = [RefineMethod::Sdf, RefineMethod::Icp]
+    let timing: Vec<String> = RefineMethod::REFINERS
         .iter()
         .map(|m| {
             let times: Vec<f64> = all
@@ -672,6 +845,8 @@ fn write_outputs(
         ("results.csv", &csv),
         ("trials.csv", &trials_csv),
         ("nees.csv", &nees_csv),
+        ("paired.csv", &paired_csv),
+        ("worse.csv", &worse_csv),
         ("table.md", &table),
     ] {
         let path = args.out.join(name);
