@@ -5,8 +5,9 @@
 //!   into per-view object points with σ_z (the refiner's input path, eq 1–7);
 //! - [`initial_pose`]: initial poses drawn like the paper's template detector, fitted to its
 //!   initial row of Table I;
-//! - [`metrics`]: symmetry-aware NEES;
+//! - [`metrics`]: symmetry-aware NEES, correlations, McNemar's test;
 //! - [`table1`]: Table I, SDF refinement against ICP;
+//! - [`depth_uncertainty`]: Fig. 3, predicted σ_z (eq 1–5) against the measured spread;
 //! - [`active`]: an active session on a mock bin (the demo's and the tests');
 //! - [`capture_folder`]: mock captures written as BOP folders, and calibration captures;
 //! - [`policies`]: Fig. 9, the view policies compared;
@@ -20,6 +21,7 @@
 
 pub mod active;
 pub mod capture_folder;
+pub mod depth_uncertainty;
 pub mod initial_pose;
 pub mod metrics;
 pub mod policies;

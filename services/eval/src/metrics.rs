@@ -68,6 +68,34 @@ pub fn chi2_mean_band(k: usize, n: usize) -> (f64, f64) {
     (k - half, k + half)
 }
 
+/// Pearson correlation of two equally long samples (NaN when either has no spread).
+pub fn pearson(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len().min(y.len()) as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for (a, b) in x.iter().zip(y) {
+        sxy += (a - mx) * (b - my);
+        sxx += (a - mx) * (a - mx);
+        syy += (b - my) * (b - my);
+    }
+    sxy / (sxx * syy).sqrt()
+}
+
+/// Spearman rank correlation: Pearson of the ranks (ties broken by order; meant for
+/// continuous data).
+pub fn spearman(x: &[f64], y: &[f64]) -> f64 {
+    let rank = |v: &[f64]| {
+        let mut idx: Vec<usize> = (0..v.len()).collect();
+        idx.sort_by(|&a, &b| v[a].total_cmp(&v[b]));
+        let mut r = vec![0.0; v.len()];
+        for (k, &i) in idx.iter().enumerate() {
+            r[i] = k as f64;
+        }
+        r
+    };
+    pearson(&rank(x), &rank(y))
+}
+
 /// McNemar's exact two-sided test of paired binary outcomes: with `b` pairs where only the
 /// first method is right and `c` where only the second is, the probability under "both are
 /// equally good" (each discordant pair a fair coin) of a split at least as uneven:
@@ -92,6 +120,17 @@ mod tests {
     use super::*;
     use glint_geometry::symmetry::Axis;
     use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn correlations_of_exact_relations() {
+        let x = [1.0, 2.0, 3.0, 4.0, 5.0];
+        let line: Vec<f64> = x.iter().map(|v| 3.0 - 2.0 * v).collect();
+        assert!((pearson(&x, &line) + 1.0).abs() < 1e-12);
+        // A monotone but curved relation: ranks agree exactly, values do not.
+        let cubed: Vec<f64> = x.iter().map(|v| v * v * v).collect();
+        assert!((spearman(&x, &cubed) - 1.0).abs() < 1e-12);
+        assert!(pearson(&x, &cubed) < 1.0 - 1e-3);
+    }
 
     #[test]
     fn mcnemar_matches_the_binomial_by_hand() {

@@ -33,7 +33,7 @@ pub enum EvalCommand {
 pub fn run(command: EvalCommand) -> anyhow::Result<()> {
     match command {
         EvalCommand::Refine(args) => refine_exp::run(&args),
-        EvalCommand::Uncertainty(args) => uncertainty_exp::run(&args),
+        EvalCommand::Uncertainty(args) => uncertainty_exp::run_cmd(&args),
         EvalCommand::Camera(args) => camera_exp::run(&args),
         EvalCommand::Active(args) => active_exp::run_cmd(&args),
         EvalCommand::Prediction(args) => prediction_exp::run_cmd(&args),
