@@ -7,6 +7,7 @@
 //!   ([`material_file`]: fitted, and the mock camera's ground truth).
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+#![warn(missing_docs)]
 
 pub mod bsdf_fit;
 pub mod material_file;

@@ -24,20 +24,39 @@ pub const MATERIAL_FORMAT: &str = "glint-material/1";
 #[derive(Debug, thiserror::Error)]
 pub enum MaterialFileError {
     // The reason is in the message, not a `source`: a chain printed whole would say it twice.
+    /// The file could not be read (missing, unreadable): check the path.
     #[error("cannot read {}: {error}", path.display())]
     Read {
+        /// The file.
         path: PathBuf,
+        /// The I/O error.
         error: std::io::Error,
     },
+    /// The file could not be written (its folder is missing or not writable).
     #[error(transparent)]
     Write(#[from] glint_geometry::io::AtomicWriteError),
+    /// The text is not JSON of the expected shape (or could not be encoded, when writing).
     #[error("{}: not a material file: {problem}", path.display())]
-    Malformed { path: PathBuf, problem: String },
+    Malformed {
+        /// The file, or where the text came from.
+        path: PathBuf,
+        /// What the JSON parser reported.
+        problem: String,
+    },
+    /// The `format` is not [`MATERIAL_FORMAT`]: not a fitted material file, or another version.
     #[error("{}: format {found:?}, expected {MATERIAL_FORMAT:?}", path.display())]
-    Format { path: PathBuf, found: String },
+    Format {
+        /// The file, or where the text came from.
+        path: PathBuf,
+        /// The file's `format`.
+        found: String,
+    },
+    /// A parameter map is incomplete, has an unknown name or a value out of range.
     #[error("{}: {source}", path.display())]
     Params {
+        /// The file, or where the text came from.
         path: PathBuf,
+        /// What is wrong with the map, naming it.
         #[source]
         source: MaterialMapError,
     },
@@ -46,6 +65,7 @@ pub enum MaterialFileError {
 /// A fitted material: its principled parameters and, free-form, how it was obtained.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MaterialFile {
+    /// The file format, [`MATERIAL_FORMAT`].
     pub format: String,
     /// Every name of [`PrincipledParams::NAMES`], each in [0, 1].
     pub params: BTreeMap<String, f32>,
@@ -55,6 +75,7 @@ pub struct MaterialFile {
 }
 
 impl MaterialFile {
+    /// A material file of `params` with the fit's `provenance`, in format [`MATERIAL_FORMAT`].
     pub fn new(
         params: &PrincipledParams<f32>,
         provenance: serde_json::Map<String, serde_json::Value>,
@@ -116,14 +137,20 @@ impl MaterialFile {
 /// the bin's materials. Evaluation only: estimators and predictors never read it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct GroundTruthMaterials {
+    /// A warning for readers of the file: ground truth, for evaluation only.
     pub note: String,
     /// The part's name.
     pub part: String,
+    /// The part's principled parameters (every name of [`PrincipledParams::NAMES`], each in
+    /// [0, 1]).
     pub part_material: BTreeMap<String, f32>,
+    /// The bin's principled parameters (every name of [`PrincipledParams::NAMES`], each in
+    /// [0, 1]).
     pub bin_material: BTreeMap<String, f32>,
 }
 
 impl GroundTruthMaterials {
+    /// The ground truth of part `part_name` with materials `part` and `bin`.
     pub fn new(part_name: &str, part: PrincipledParams<f32>, bin: PrincipledParams<f32>) -> Self {
         Self {
             note: "ground truth of the simulator, for evaluation only; estimators must not read it"
@@ -134,6 +161,7 @@ impl GroundTruthMaterials {
         }
     }
 
+    /// Reads `path` and validates both parameter maps.
     pub fn load(path: &Path) -> Result<Self, MaterialFileError> {
         let file: Self = from_json(&read_text(path)?, path)?;
         validated(path, &file.part_material, "part_material")?;
@@ -141,6 +169,7 @@ impl GroundTruthMaterials {
         Ok(file)
     }
 
+    /// Writes the file atomically (a reader never sees half of it).
     pub fn save(&self, path: &Path) -> Result<(), MaterialFileError> {
         write_json(path, self)
     }

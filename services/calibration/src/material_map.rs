@@ -15,13 +15,29 @@ pub fn params_to_map(p: &PrincipledParams<f32>) -> std::collections::BTreeMap<St
 /// Why a parameter map is not a material.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MaterialMapError {
+    /// The map has a name that is not one of [`PrincipledParams::NAMES`] (a typo, or another
+    /// format's key); remove or rename it.
     #[error("{field}: unknown parameter {name:?}")]
-    Unknown { field: String, name: String },
+    Unknown {
+        /// The map's name, as given to [`params_from_map`].
+        field: String,
+        /// The unknown name.
+        name: String,
+    },
+    /// A parameter of [`PrincipledParams::NAMES`] is absent: every one must be given.
     #[error("{field}: missing parameter {name:?}")]
-    Missing { field: String, name: &'static str },
+    Missing {
+        /// The map's name, as given to [`params_from_map`].
+        field: String,
+        /// The missing parameter.
+        name: &'static str,
+    },
+    /// A value is outside its valid range (every principled parameter lies in [0, 1]).
     #[error("{field}: {source}")]
     OutOfRange {
+        /// The map's name, as given to [`params_from_map`].
         field: String,
+        /// Which parameter, and its value.
         #[source]
         source: glint_render::bsdf::InvalidParameter,
     },

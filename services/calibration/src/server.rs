@@ -67,8 +67,9 @@ impl CalibrationServer {
     }
 }
 
-/// Adam iterations when a request gives 0, and the most a request may ask for.
+/// Adam iterations when a request gives 0.
 pub const DEFAULT_FIT_ITERATIONS: usize = 300;
+/// The most Adam iterations a request may ask for; more is INVALID_ARGUMENT.
 pub const MAX_FIT_ITERATIONS: usize = 10_000;
 /// Progress messages buffered for a slow client before the fit waits.
 const FIT_EVENTS_BUFFERED: usize = 16;

@@ -12,19 +12,27 @@ use crate::response::{ResponseError, ResponseTable};
 /// A fitted material and a calibrated response.
 #[derive(Clone, Debug)]
 pub struct Calibration {
+    /// The part's fitted principled BSDF (`glint calibrate bsdf`).
     pub material: MaterialFile,
+    /// The camera's response g and g⁻¹ (eq 13; `glint calibrate response`).
     pub response: ResponseTable,
 }
 
 /// Why a calibration cannot be had.
 #[derive(Debug, thiserror::Error)]
 pub enum CalibrationFileError {
+    /// The material file could not be read or is invalid; the error names the file.
     #[error(transparent)]
     Material(#[from] MaterialFileError),
+    /// The response file could not be read or is invalid; the error names the file.
     #[error(transparent)]
     Response(#[from] ResponseError),
+    /// Only one of the material and response files was given: pass both, or neither to use
+    /// the shipped calibration.
     #[error("--material and --response go together")]
     OnlyOne,
+    /// No files were given and no calibration is shipped for this part (the part's display
+    /// name): calibrate it and pass both files.
     #[error(
         "rendering the {0} needs its calibrated material and response: only the Zigzag's are \
          embedded; pass --material and --response (from glint calibrate bsdf and glint \
@@ -37,6 +45,7 @@ const ZIGZAG_MATERIAL: &str = include_str!("../../../assets/calibration/zigzag/m
 const ZIGZAG_RESPONSE: &str = include_str!("../../../assets/calibration/zigzag/response.json");
 
 impl Calibration {
+    /// Reads and validates a material file and a response file.
     pub fn load(material: &Path, response: &Path) -> Result<Self, CalibrationFileError> {
         Ok(Self {
             material: MaterialFile::load(material)?,

@@ -56,47 +56,80 @@ pub fn free_lower_bounds() -> [f32; FREE] {
 /// Why a fit could not run.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum FitError {
+    /// A view's [`FitTarget`] has not one radiance per pixel.
     #[error("view {view}: the target has {pixels} pixels but {values} radiance values")]
     LengthMismatch {
+        /// Index of the view in [`FitProblem::views`].
         view: usize,
+        /// Its target's pixel count.
         pixels: usize,
+        /// Its target's radiance count.
         values: usize,
     },
+    /// No target pixel both sees a fitted instance and has a finite, positive target: check
+    /// the poses, [`FitProblem::instances`] and the targets.
     #[error(
         "none of the {pixels} target pixels sees instances {instances:?} with a finite, non-zero target"
     )]
-    NoPixels { pixels: usize, instances: Vec<u32> },
+    NoPixels {
+        /// Target pixels over all views.
+        pixels: usize,
+        /// The fitted instances (scene indices).
+        instances: Vec<u32>,
+    },
+    /// A fitted instance index is out of the scene's range.
     #[error("instance {instance} is not in the scene ({instances} instances)")]
-    NoSuchInstance { instance: u32, instances: usize },
+    NoSuchInstance {
+        /// The offending scene index.
+        instance: u32,
+        /// The scene's instance count.
+        instances: usize,
+    },
+    /// A setting is out of range ([`FitConfig`], its fixed parameters, or no start value); the
+    /// message says which.
     #[error("{0}")]
     Config(String),
+    /// The progress callback returned `Break`; no result.
     #[error("stopped by its caller after iteration {iteration}")]
-    Stopped { iteration: usize },
+    Stopped {
+        /// The last iteration run (0-based).
+        iteration: usize,
+    },
 }
 
 /// The object's pixels and their target radiance (same unit as the renderer, W·sr⁻¹·m⁻²).
 #[derive(Clone, Debug, Default)]
 pub struct FitTarget {
+    /// Pixels (column u, row v) of the object.
     pub pixels: Vec<(u32, u32)>,
+    /// Target radiance of each pixel, W·sr⁻¹·m⁻²; pixels with a non-finite or non-positive
+    /// value are left out of the loss.
     pub radiance: Vec<f32>,
 }
 
 /// One view of the fit: the left camera, the projector as it was for that view, and the target.
 #[derive(Clone, Debug)]
 pub struct FitView {
+    /// The left camera, placed in the world.
     pub camera: Camera,
+    /// The projector (pose, pattern, intensity) of this view.
     pub projector: Projector,
+    /// The pixels to match and their radiance.
     pub target: FitTarget,
 }
 
 /// Adam settings and the fixed parameters.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FitConfig {
+    /// Adam steps, ≥ 1.
     pub iterations: usize,
     /// Initial Adam step size; it decays geometrically to `final_learning_rate`.
     pub learning_rate: f32,
+    /// Adam step size of the last iteration, > 0.
     pub final_learning_rate: f32,
+    /// Adam's decay rate β₁ of the gradient's running mean, in [0, 1).
     pub beta1: f32,
+    /// Adam's decay rate β₂ of the squared gradient's running mean, in [0, 1).
     pub beta2: f32,
     /// The starting value of every free parameter (the paper's medium value 0.5).
     pub start: f32,
@@ -162,7 +195,9 @@ pub const JUDGE_SEED: u64 = 0x00D6_E5EE;
 /// One of [`FitProblem::fit_from_starts`]' fits.
 #[derive(Clone, Debug)]
 pub struct StartFit {
+    /// The start value of every free parameter, in [0, 1].
     pub start: f32,
+    /// The fit from that start.
     pub result: FitResult,
     /// Its unbiased L2 under the common judging render (NaN with a single start).
     pub judged_l2: f64,
@@ -172,7 +207,9 @@ pub struct StartFit {
 /// the one with the lowest judged loss.
 #[derive(Clone, Debug)]
 pub struct StartFits {
+    /// One fit per start, in the order of the starts.
     pub fits: Vec<StartFit>,
+    /// Index in `fits` of the lowest [`StartFit::judged_l2`] (0 with a single start).
     pub best: usize,
 }
 
@@ -181,13 +218,17 @@ pub struct StartFits {
 /// the part in a bin has the same material — and how pixels are rendered. The loss sums over
 /// all views (one normalisation, so each pixel weighs the same whichever view it is in).
 pub struct FitProblem<'a> {
+    /// The scene; the fitted instances' own materials in it are not used.
     pub scene: &'a Scene,
+    /// The views and their targets.
     pub views: &'a [FitView],
     /// Scene indices of the instances whose material is fitted.
     pub instances: &'a [u32],
+    /// How a pixel is rendered.
     pub rendering: PixelRendering,
     /// How the gradient's residual is estimated (matters with multi-path only).
     pub residual: Residual,
+    /// The per-pixel loss.
     pub loss: Loss,
     /// Side of the square pixel blocks the loss compares, pixels: 1 compares pixels; b > 1
     /// compares each b × b block's mean radiance (rendered against measured, over the block's
@@ -203,11 +244,17 @@ pub enum Loss {
     L2,
     /// L = Σ (ln(r + ε) − ln(t + ε))² / N, ε = `floor` (W·sr⁻¹·m⁻²): every pixel weighs
     /// alike whatever its brightness, relative errors count.
-    LnRadiance { floor: f32 },
+    LnRadiance {
+        /// ε, W·sr⁻¹·m⁻², > 0.
+        floor: f32,
+    },
     /// Huber: (r − t)² within ±δ, 2δ|r − t| − δ² beyond (δ = `delta`, W·sr⁻¹·m⁻²), over
     /// Σ t²: L2 for ordinary pixels, a bounded slope for Monte Carlo fireflies (in the render
     /// or the capture) that would otherwise dominate.
-    Huber { delta: f32 },
+    Huber {
+        /// δ, W·sr⁻¹·m⁻², > 0.
+        delta: f32,
+    },
 }
 
 impl Loss {
@@ -256,8 +303,11 @@ pub const DECORRELATED_SEED_OFFSET: u64 = 0x5DEE_CE66;
 /// `seed + k`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PixelRendering {
+    /// Which light paths the render follows.
     pub transport: LightTransport,
+    /// Samples per pixel (≥ 1; one through the pixel centre, more jittered).
     pub samples_per_pixel: u32,
+    /// Seed of the random streams (view k uses `seed + k`).
     pub seed: u64,
 }
 

@@ -29,6 +29,7 @@ use crate::response::{ExposureStack, ResponseError, ResponseTable};
 /// One view of a capture.
 #[derive(Clone, Debug)]
 pub struct CaptureView {
+    /// The view's image id in the BOP scene.
     pub im_id: u32,
     /// Left camera → world.
     pub t_w_c: Isometry3<f64>,
@@ -41,14 +42,19 @@ pub struct CaptureView {
 pub struct Capture {
     /// The BOP scene folder read.
     pub scene_dir: PathBuf,
+    /// The part's BOP object id.
     pub obj_id: u32,
     /// Part instances are scene indices `part_instances`; the bin is `bin_instance`.
     pub scene: Scene,
+    /// Scene indices of the labelled part instances, whose shared material is fitted.
     pub part_instances: Vec<u32>,
+    /// Scene index of the bin.
     pub bin_instance: u32,
     /// The bin's known material (the radiometric reference).
     pub reference: PrincipledParams<f32>,
+    /// The SLI rig (cameras, projector) as known hardware.
     pub rig: SliRig,
+    /// The captured views.
     pub views: Vec<CaptureView>,
 }
 
@@ -69,43 +75,77 @@ pub trait CaptureReader: Send + Sync {
 /// Why a capture could not be fitted; each names what to fix.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneFitError {
+    /// The capture could not be read; the reader's error names the file.
     #[error("{}: {source}", dir.display())]
     Capture {
+        /// The capture folder given.
         dir: PathBuf,
+        /// The reader's error.
         source: CaptureReadError,
     },
+    /// A requested view is not in the capture: pick one of `available`.
     #[error("{}: no view {im_id}; the capture has views {available:?}", scene_dir.display())]
     NoView {
+        /// The BOP scene folder read.
         scene_dir: PathBuf,
         /// Index of the view in [`SceneFitConfig::views`].
         index: usize,
+        /// The requested image id.
         im_id: u32,
+        /// The capture's image ids.
         available: Vec<u32>,
     },
+    /// A view is requested twice: name each once.
     #[error("view {im_id} is given twice")]
-    RepeatedView { index: usize, im_id: u32 },
+    RepeatedView {
+        /// Index of the repeat in [`SceneFitConfig::views`].
+        index: usize,
+        /// The repeated image id.
+        im_id: u32,
+    },
+    /// No views were named and the capture has fewer than two, so none is left after holding
+    /// out the last: name the views to fit.
     #[error(
         "{}: the capture has only view(s) {available:?}; name the views to fit (by default every view but the last, kept for evaluation)",
         scene_dir.display()
     )]
     NoDefaultViews {
+        /// The BOP scene folder read.
         scene_dir: PathBuf,
+        /// The capture's image ids.
         available: Vec<u32>,
     },
+    /// A view's exposure stack could not be read.
     #[error("view {im_id}: exposure stack {}: {source}", dir.display())]
     Stack {
+        /// The view's image id.
         im_id: u32,
+        /// The stack's folder.
         dir: PathBuf,
+        /// The reader's error.
         source: CaptureReadError,
     },
+    /// The response cannot make a radiance map of a view's stack (its bit depth differs from
+    /// the stack's): use the response calibrated for this camera.
     #[error("view {im_id}: radiance map: {source}")]
-    Radiance { im_id: u32, source: ResponseError },
+    Radiance {
+        /// The view's image id.
+        im_id: u32,
+        /// Why the radiance map failed.
+        source: ResponseError,
+    },
+    /// A view's radiance map gives no fit target (wrong size, or too little of the reference
+    /// surface measured).
     #[error("view {im_id} ({}): {source}", dir.display())]
     Target {
+        /// The view's image id.
         im_id: u32,
+        /// The view's exposure-stack folder.
         dir: PathBuf,
+        /// Why the target failed.
         source: TargetError,
     },
+    /// The fit itself failed or was stopped.
     #[error(transparent)]
     Fit(#[from] FitError),
 }
@@ -128,16 +168,25 @@ pub struct SceneFitConfig {
     pub views: Vec<u32>,
     /// Adam iterations per start.
     pub iterations: usize,
+    /// Which light paths the fit's renders follow.
     pub transport: LightTransport,
     /// Samples per pixel of multi-path renders.
     pub spp: u32,
     /// Every `pixel_step`-th object pixel in u and v enters the loss.
     pub pixel_step: u32,
+    /// How the gradient's residual is estimated with multi-path ([`FitProblem::residual`]).
     pub residual: Residual,
+    /// The loss.
     pub loss: LossChoice,
+    /// Side of the loss's pixel blocks, pixels ([`FitProblem::block_px`]; 1: single pixels).
     pub block_px: u32,
+    /// Fresh random numbers every iteration ([`FitConfig::reseed`]).
     pub reseed: bool,
+    /// Roughness floor, in [0, 1], of multi-path vertices after the first at the first
+    /// iteration (0: exact renders).
     pub min_indirect_roughness: f32,
+    /// The roughness floor of the last iteration, in [0, 1]
+    /// ([`FitConfig::final_min_indirect_roughness`]).
     pub final_min_indirect_roughness: f32,
     /// Start value of every free parameter, one fit per start; the best is kept.
     pub starts: Vec<f32>,
@@ -172,24 +221,32 @@ pub struct FitProgress {
     pub iterations_total: usize,
     /// The step's loss, at `params`.
     pub loss: f64,
+    /// The parameters the loss was evaluated at.
     pub params: PrincipledParams<f32>,
 }
 
 /// A scene fit's outcome: what `glint calibrate bsdf` writes and prints.
 pub struct SceneFit {
+    /// The capture fitted.
     pub capture: Capture,
     /// The views fitted, in order.
     pub im_ids: Vec<u32>,
     /// Per view: the fit's view (pixels on every `pixel_step`-th row and column) and the
     /// measured target it came from.
     pub views: Vec<FitView>,
+    /// Per view: the measured target, its radiometric scale and pixel counts.
     pub measured: Vec<MeasuredTarget>,
+    /// How the fit rendered pixels (with the first iteration's roughness floor).
     pub rendering: PixelRendering,
+    /// How the gradient's residual was estimated.
     pub residual: Residual,
+    /// The loss, with its scale from the targets.
     pub loss: Loss,
+    /// Side of the loss's pixel blocks, pixels.
     pub block_px: u32,
     /// Every start's fit, in the order of the starts.
     pub starts: Vec<StartFit>,
+    /// Index in `starts` of the best fit.
     pub best: usize,
     /// The best start's result.
     pub result: FitResult,

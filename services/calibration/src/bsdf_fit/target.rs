@@ -13,6 +13,7 @@ use super::{FitTarget, PixelRendering};
 /// A target built from a radiance map.
 #[derive(Clone, Debug)]
 pub struct MeasuredTarget {
+    /// The object's pixels and their radiance, W·sr⁻¹·m⁻² (measured / `scale`).
     pub target: FitTarget,
     /// Relative radiance-map units per W·sr⁻¹·m⁻²: the median over reference pixels of
     /// measured / rendered.
@@ -26,8 +27,16 @@ pub struct MeasuredTarget {
 /// Why a target could not be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum TargetError {
+    /// The radiance map is not the camera's image size: it belongs to another camera.
     #[error("the radiance map is {map:?} px but the camera is {camera:?} px")]
-    SizeMismatch { map: (u32, u32), camera: (u32, u32) },
+    SizeMismatch {
+        /// The map's (width, height), pixels.
+        map: (u32, u32),
+        /// The camera's (width, height), pixels.
+        camera: (u32, u32),
+    },
+    /// Fewer than 100 reference pixels are seen whole, lit and measured (the count is given):
+    /// the view must show more of the reference surface, lit by the projector and well exposed.
     #[error("only {0} reference pixels are lit and well exposed: cannot fix the radiometric scale")]
     NoReference(usize),
 }

@@ -81,7 +81,9 @@ impl Levels {
 /// A chosen sample pixel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SamplePixel {
+    /// Pixel column.
     pub u: u32,
+    /// Pixel row.
     pub v: u32,
 }
 
@@ -248,6 +250,8 @@ pub fn calibrate(
 /// How a response was solved, kept in its JSON.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SolveInfo {
+    /// Smoothness weight λ of the solve ([`DebevecConfig::lambda`]); 0 for a table decoded
+    /// from a message, which does not carry the solve.
     pub lambda: f64,
     /// Sample pixels used.
     pub samples: usize,

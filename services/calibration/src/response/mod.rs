@@ -19,15 +19,29 @@ use debevec::Levels;
 /// Why a response calibration failed.
 #[derive(Debug, thiserror::Error)]
 pub enum ResponseError {
+    /// The stack, a setting or a table does not meet its stated requirements; the message
+    /// names the field and the requirement.
     #[error("{0}")]
     Input(String),
+    /// A response file could not be read, parsed, checked or written.
     #[error("{}: {message}", path.display())]
-    File { path: PathBuf, message: String },
+    File {
+        /// The file, or where the text came from.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+    /// Fewer than two sample pixels are usable: re-capture with exposure times that read the
+    /// scene well (not all saturated, not all black) in at least two exposures.
     #[error(
         "only {found} pixel(s) are well exposed (0 < DN < max) in at least two exposures: \
          the stack is all saturated or all dark; change the exposure times"
     )]
-    NoUsablePixels { found: usize },
+    NoUsablePixels {
+        /// The usable sample pixels found.
+        found: usize,
+    },
+    /// The SVD least-squares solve failed or gave a non-finite response.
     #[error("least-squares solve failed: {0}")]
     Solve(String),
 }
@@ -43,28 +57,40 @@ pub const RESPONSE_FORMAT: &str = "glint-response/1";
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ResponseTable {
+    /// The file format, [`RESPONSE_FORMAT`].
     pub format: String,
+    /// Bits per pixel of the camera's readout, 1 … 16.
     pub bit_depth: u8,
+    /// Largest DN, 2^`bit_depth` − 1 (saturation).
     pub max_dn: u16,
     /// g⁻¹: per level, the level's centre DN and ln X.
     pub inverse: InverseTable,
     /// g: intensity (DN / max DN, in [0, 1]) over a uniform grid of ln X spanning the inner
     /// levels; from the inverse made monotone (running maximum).
     pub forward: ForwardTable,
+    /// How g was solved (settings, stack, residual).
     pub solve: SolveInfo,
 }
 
+/// g⁻¹ (eq 13) tabulated per level of the Debevec–Malik solve: one level per DN, binned to
+/// at most [`MAX_LEVELS`] for deep sensors.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct InverseTable {
+    /// Each level's centre DN, ascending from 0 to `max_dn`.
     pub dn: Vec<f64>,
+    /// Each level's ln X = ln g⁻¹, X in relative exposure units (X = 1 at the middle level).
     pub ln_exposure: Vec<f64>,
 }
 
+/// g (eq 13) tabulated over a uniform grid of ln exposure, as [`ResponseTable::intensity`]
+/// reads it ([`check_forward`] states the requirements).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ForwardTable {
+    /// The grid: ln X, X in relative exposure units, uniform and increasing.
     pub ln_exposure: Vec<f64>,
+    /// The intensity g reads at each grid point: DN / max DN, in [0, 1].
     pub intensity: Vec<f64>,
 }
 
@@ -74,6 +100,7 @@ pub struct ResponseComparison {
     /// max |Δ ln g⁻¹| over the levels in range, after removing the best constant offset (the
     /// unit of exposure is arbitrary).
     pub max_abs_ln_error: f64,
+    /// RMS of Δ ln g⁻¹ over the same levels, after removing the same offset.
     pub rms_ln_error: f64,
     /// The removed offset: ln(recovered unit / true unit).
     pub ln_offset: f64,

@@ -112,6 +112,7 @@ impl ExposureStack {
     pub fn exposures_s(&self) -> &[f64] {
         &self.exposures_s
     }
+    /// Bits per pixel of the readout, 1 … 16.
     pub fn bit_depth(&self) -> u8 {
         self.bit_depth
     }
