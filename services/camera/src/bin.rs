@@ -33,14 +33,21 @@ impl Default for BinSpec {
 /// Why parts could not be placed.
 #[derive(Debug, thiserror::Error)]
 pub enum BinError {
+    /// The part mesh's collision SDF (1 mm voxels) could not be built: the mesh is unusable,
+    /// not watertight, or too big (check that it is in metres).
     #[error("the part's collision SDF: {0}")]
     Sdf(#[from] SdfError),
+    /// No collision-free start pose was found for every part within 20 attempts per part;
+    /// use fewer instances or a bigger bin.
     #[error(
         "could only place {placed} of {requested} parts in the bin after {attempts} attempts: use fewer instances or a bigger bin"
     )]
     Crowded {
+        /// Parts placed before giving up.
         placed: usize,
+        /// Parts asked for.
         requested: usize,
+        /// Drop attempts made, successful or not.
         attempts: usize,
     },
 }

@@ -19,9 +19,14 @@ use nalgebra::Isometry3;
 /// How the mock camera images a scene.
 #[derive(Clone, Debug)]
 pub struct CaptureConfig {
+    /// Which light paths the renders follow (single-path or with inter-reflections).
     pub transport: LightTransport,
+    /// Path samples per pixel of each camera's render, ≥ 1 (0 counts as 1).
     pub samples_per_pixel: u32,
+    /// The sensor that reads rendered radiance out as digital numbers (noise, response,
+    /// saturation, quantisation).
     pub sensor: Sensor,
+    /// The stereo matcher that turns the read-out pattern images into depth.
     pub matcher: StereoMatcherConfig,
     /// Fraction of lit projector pixels in the random-dot pattern.
     pub pattern_fill: f64,
@@ -102,8 +107,9 @@ pub type NoiseShots = [Image<u16>; 2];
 pub struct StereoCapture {
     /// Left camera → world.
     pub t_w_c: Isometry3<f64>,
-    /// Pattern images as read out (digital numbers, camera-response encoded).
+    /// Left pattern image of shot 1 as read out (digital numbers, camera-response encoded).
     pub left: Image<u16>,
+    /// Right pattern image of shot 1, as [`Self::left`].
     pub right: Image<u16>,
     /// Shots 2..=K of a multi-shot capture, `[left, right]` each, in projection order (empty
     /// for a single shot); `left`, `right` above are shot 1.
@@ -134,8 +140,9 @@ impl StereoCapture {
 /// and differ only in sensor noise ([`MockSliCamera::capture_rendered`]).
 #[derive(Clone, Debug)]
 pub struct RenderedShots {
-    /// Left and right radiance under each shot's pattern, W·sr⁻¹·m⁻², K each.
+    /// Left camera radiance under each shot's pattern, W·sr⁻¹·m⁻², K images.
     pub left: Vec<Image<f32>>,
+    /// Right camera radiance under each shot's pattern, W·sr⁻¹·m⁻², K images.
     pub right: Vec<Image<f32>>,
     /// The left camera's ground truth (radiance under shot 0's pattern), evaluation only.
     pub truth: CaptureTruth,
@@ -173,17 +180,25 @@ impl CaptureTruth {
 /// Why a capture failed.
 #[derive(Debug, thiserror::Error)]
 pub enum CaptureError {
+    /// The stereo matcher rejected its input or configuration (e.g. left and right shot
+    /// counts differ); see the [`StereoError`].
     #[error("stereo matching: {0}")]
     Stereo(#[from] StereoError),
     /// The exposure times of an exposure stack are unusable.
     #[error("exposure stack: {problem}")]
-    Exposures { problem: String },
+    Exposures {
+        /// What is wrong with the exposure times.
+        problem: String,
+    },
 }
 
 /// A simulated structured-light camera looking at a fixed scene.
 pub struct MockSliCamera<'a> {
+    /// The stereo cameras and projector, posed relative to the left camera.
     pub rig: SliRig,
+    /// The scene it looks at, in the world frame.
     pub scene: &'a Scene,
+    /// How it renders, reads out and matches.
     pub config: CaptureConfig,
 }
 

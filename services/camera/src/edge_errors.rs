@@ -21,11 +21,13 @@ pub const EDGE_STEP_M: f32 = 5e-3;
 pub struct EdgeBin {
     /// Distances `min_px..=max_px` (L∞ px).
     pub min_px: u32,
+    /// Upper end of the distances, inclusive (L∞ px); `u32::MAX` for the last bin.
     pub max_px: u32,
     /// Part pixels at these distances, with matched depth.
     pub valid: usize,
-    /// Of those, more than 5 mm off: farther than the truth / nearer.
+    /// Of those, more than 5 mm farther than the truth.
     pub farther_5mm: usize,
+    /// Of those, more than 5 mm nearer than the truth.
     pub nearer_5mm: usize,
 }
 

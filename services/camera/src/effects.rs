@@ -23,8 +23,14 @@ pub struct MissingCauses {
     pub pixels: usize,
     /// Of those, without depth.
     pub missing: usize,
+    /// Of the missing, those whose left-image matching window holds a pixel clipped at full
+    /// scale.
     pub saturated: usize,
+    /// Of the missing, those not clipped whose window mean is below [`DARK_FRACTION`] of full
+    /// scale.
     pub low_snr: usize,
+    /// Of the missing, those whose direct share `I_single / I_multi` is below
+    /// [`INTER_REFLECTION_RATIO`] (τ_I of eq 16).
     pub inter_reflection: usize,
     /// Missing for none of the three (occlusion in the right view, window straddling an edge, …).
     pub other: usize,

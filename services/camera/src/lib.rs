@@ -2,6 +2,7 @@
 //! stereo matching, and the dataset formats captures are written in.
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+#![warn(missing_docs)]
 
 pub mod bin;
 pub mod capture;

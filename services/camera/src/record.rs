@@ -13,11 +13,16 @@ use crate::visibility::{InstanceVisibility, instance_visibility};
 /// Why a capture could not be recorded.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
+    /// A BOP file could not be written; the error names it.
     #[error(transparent)]
     Dataset(#[from] DatasetError),
+    /// The GT info of an instance could not be computed: the depth map's size differs from
+    /// the camera's image size.
     #[error("GT info of image {im_id}: {source}")]
     GtInfo {
+        /// The image being written.
         im_id: u32,
+        /// Why the GT info failed.
         #[source]
         source: GtInfoError,
     },

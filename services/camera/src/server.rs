@@ -50,12 +50,15 @@ pub const SERVICE_NAMES: [&str; 2] = [CAMERA_SERVICE_NAME, MOCK_CAMERA_SERVICE_N
 pub const MAX_INSTANCES: u32 = 40;
 /// Image size limits, px: at K = 8 shots a capture streams 40 bytes per pixel (16 pattern
 /// images, depth, 2 noise shots), which keeps the largest within the 256 MiB a stream may
-/// declare.
+/// declare. This is the smallest width and height a scene may ask for.
 pub const MIN_IMAGE_SIDE_PX: u32 = 32;
+/// Largest image width a scene may ask for, px (see [`MIN_IMAGE_SIDE_PX`]).
 pub const MAX_WIDTH_PX: u32 = 2560;
+/// Largest image height a scene may ask for, px (see [`MIN_IMAGE_SIDE_PX`]).
 pub const MAX_HEIGHT_PX: u32 = 2048;
-/// Samples per pixel when a request gives 0, and the most it may ask for.
+/// Samples per pixel when a request gives 0.
 pub const DEFAULT_SAMPLES_PER_PIXEL: u32 = 4;
+/// Most samples per pixel a request may ask for.
 pub const MAX_SAMPLES_PER_PIXEL: u32 = 1024;
 /// Most views one `ListCandidateViews` returns.
 pub const MAX_CANDIDATE_VIEWS: u32 = 1000;
@@ -98,6 +101,7 @@ pub struct SceneRequest {
     pub name: String,
     /// The part's true material.
     pub material: PrincipledParams<f32>,
+    /// Instances, drop seed, resolution and samples per pixel of the set-up.
     pub spec: BinSetupSpec,
 }
 
@@ -283,10 +287,14 @@ pub fn scene_request(msg: &v1::SetUpSceneRequest) -> Result<SceneRequest, Conver
 
 /// The mock's scene: the bin set-up and what the server says about its part.
 pub struct MockScene {
+    /// The rig, bin, dropped parts, render scene and capture settings.
     pub setup: BinSetup,
+    /// The built-in part's name or the mesh file's, as `SetUpScene` answers it.
     pub name: String,
     /// [`TriMesh::content_sha256_hex`] of the part's mesh (metres): its identity in sessions.
     pub mesh_sha256_hex: String,
+    /// The part's true material: ground truth, served only by `GetGroundTruth`, for
+    /// evaluation only.
     pub material: PrincipledParams<f32>,
 }
 

@@ -28,12 +28,17 @@ pub fn capture_seed(scene_seed: u64, view: usize) -> u64 {
 /// Why a set-up could not be built.
 #[derive(Debug, thiserror::Error)]
 pub enum SetupError {
+    /// The rig could not be resized to the requested resolution; use a width and height in
+    /// `1..=65535` px.
     #[error("rig: {0}")]
     Rig(#[from] glint_geometry::camera::CameraError),
+    /// The parts could not be dropped into the bin (see [`BinError`]).
     #[error("dropping the parts: {0}")]
     Drop(#[from] BinError),
+    /// The parts and the bin did not form a renderable scene.
     #[error("building the scene: {0}")]
     Scene(#[from] SceneError),
+    /// The default matcher's disparity range could not be set up for the rig.
     #[error("matcher: {0}")]
     Matcher(#[from] StereoError),
 }
@@ -45,8 +50,9 @@ pub struct BinSetupSpec {
     pub instances: u32,
     /// Seed of the drop (the parts' poses).
     pub seed: u64,
-    /// Camera resolution, px.
+    /// Camera image width, px.
     pub width_px: u32,
+    /// Camera image height, px.
     pub height_px: u32,
     /// Samples per pixel of the capture's renders.
     pub samples_per_pixel: u32,
@@ -54,11 +60,16 @@ pub struct BinSetupSpec {
 
 /// A bin of one part seen by the mock camera.
 pub struct BinSetup {
+    /// The Ensenso N35 rig at the spec's resolution.
     pub rig: SliRig,
+    /// The bin the parts lie in.
     pub bin: BinSpec,
     /// Object → world of each instance (scene labels 1..=N).
     pub poses: Vec<Isometry3<f64>>,
+    /// The render scene: the parts (instances 0..N, labels 1..=N), then the bin
+    /// ([`crate::bin::BIN_LABEL`]).
     pub scene: Scene,
+    /// The camera's capture settings.
     pub config: CaptureConfig,
 }
 

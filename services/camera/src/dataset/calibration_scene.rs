@@ -34,43 +34,87 @@ use crate::dataset::rig_file::read_rig_json;
 /// Why a calibration scene could not be read; each names the file to fix.
 #[derive(Debug, thiserror::Error)]
 pub enum CalibrationSceneError {
+    /// A file of the capture could not be read or parsed; the error names it.
     #[error(transparent)]
     Dataset(#[from] DatasetError),
+    /// Neither `dir` nor `dir/test/000001` holds `scene_gt.json`; write a capture with
+    /// `glint capture --exposure-stack`.
     #[error(
         "{}: not a capture: neither {} nor {} exists (write one with `glint capture --exposure-stack`)",
         dir.display(),
         dir.join("scene_gt.json").display(),
         dir.join("test").join("000001").join("scene_gt.json").display()
     )]
-    NotACapture { dir: PathBuf },
+    NotACapture {
+        /// The directory given.
+        dir: PathBuf,
+    },
+    /// A view of `scene_camera.json` lacks `cam_R_w2c`/`cam_t_w2c`; the fit needs every
+    /// view's camera pose (`glint capture` writes it).
     #[error("{}: image {im_id} has no camera pose (cam_R_w2c, cam_t_w2c)", path.display())]
-    NoCameraPose { path: PathBuf, im_id: u32 },
+    NoCameraPose {
+        /// `scene_camera.json`.
+        path: PathBuf,
+        /// The view without a pose.
+        im_id: u32,
+    },
+    /// A view's `cam_K` disagrees with the rig's left intrinsics (fx relatively by more than
+    /// 1e-6, cx by more than 1e-3 px): the scene and `glint/rig.json` are from different
+    /// cameras.
     #[error(
         "{}: image {im_id}'s cam_K (fx {fx_px}, cx {cx_px}) disagrees with {} (fx {rig_fx_px}, cx {rig_cx_px})",
         path.display(),
         rig_path.display()
     )]
     IntrinsicsMismatch {
+        /// `scene_camera.json`.
         path: PathBuf,
+        /// `glint/rig.json`.
         rig_path: PathBuf,
+        /// The disagreeing view.
         im_id: u32,
+        /// The view's focal length, px.
         fx_px: f64,
+        /// The view's principal point x, px (Glint's pixel convention).
         cx_px: f64,
+        /// The rig's left-camera focal length, px.
         rig_fx_px: f64,
+        /// The rig's left-camera principal point x, px (Glint's pixel convention).
         rig_cx_px: f64,
     },
+    /// `scene_gt.json` labels no part in any view: there is nothing to fit.
     #[error("{}: no labelled part in any view", path.display())]
-    NoPart { path: PathBuf },
+    NoPart {
+        /// `scene_gt.json`.
+        path: PathBuf,
+    },
+    /// `scene_gt.json` labels more than one object id; a calibration scene holds copies of one
+    /// part.
     #[error("{}: objects {obj_ids:?}; a calibration scene holds copies of one part", path.display())]
-    SeveralParts { path: PathBuf, obj_ids: Vec<u32> },
+    SeveralParts {
+        /// `scene_gt.json`.
+        path: PathBuf,
+        /// The object ids found, in order of first appearance.
+        obj_ids: Vec<u32>,
+    },
+    /// The scene folder has no dataset root two levels up to hold `models/`; pass the capture
+    /// directory, not a copied-out scene folder.
     #[error("{}: no models folder above it", scene_dir.display())]
-    NoModels { scene_dir: PathBuf },
+    NoModels {
+        /// The BOP scene folder.
+        scene_dir: PathBuf,
+    },
+    /// [`CalibrationScene::view`] was asked for an image id the capture does not have.
     #[error("{}: no view {im_id}; the capture has views {available:?}", scene_dir.display())]
     NoView {
+        /// The BOP scene folder.
         scene_dir: PathBuf,
+        /// The image id asked for.
         im_id: u32,
+        /// The capture's image ids.
         available: Vec<u32>,
     },
+    /// The parts and the bin did not form a renderable scene.
     #[error("building the scene: {0}")]
     Scene(#[from] SceneError),
 }
@@ -78,6 +122,7 @@ pub enum CalibrationSceneError {
 /// One view of the capture.
 #[derive(Clone, Debug)]
 pub struct CaptureView {
+    /// BOP image id of the view.
     pub im_id: u32,
     /// Left camera → world.
     pub t_w_c: Isometry3<f64>,
@@ -89,14 +134,19 @@ pub struct CaptureView {
 pub struct CalibrationScene {
     /// The BOP scene folder read.
     pub scene_dir: PathBuf,
+    /// The part's BOP object id, `models/obj_XXXXXX.ply`.
     pub obj_id: u32,
     /// Part instances are scene indices `0 .. part_instances.len()`; the bin comes last.
     pub scene: Scene,
+    /// Scene instance indices of the parts (the union over views of the labelled poses).
     pub part_instances: Vec<u32>,
+    /// Scene instance index of the bin.
     pub bin_instance: u32,
     /// The bin's known material (the radiometric reference).
     pub reference: PrincipledParams<f32>,
+    /// The rig as calibration-known hardware (`glint/rig.json`).
     pub rig: SliRig,
+    /// The views, in ascending image id.
     pub views: Vec<CaptureView>,
 }
 

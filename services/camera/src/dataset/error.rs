@@ -12,75 +12,108 @@ pub enum DatasetError {
     /// A file or directory could not be read at all (missing, no permission, ...).
     #[error("cannot read {}", path.display())]
     Read {
+        /// The file or directory.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
     /// A directory could not be created.
     #[error("cannot create the directory {}", path.display())]
     CreateDirectory {
+        /// The directory.
         path: PathBuf,
+        /// The operating system's error.
         #[source]
         source: std::io::Error,
     },
     /// The file is not valid JSON (syntax error, truncated, ...).
     #[error("{}: not valid JSON at line {line}, column {column}: {problem}", path.display())]
     Json {
+        /// The JSON file.
         path: PathBuf,
+        /// Line of the error, 1-based.
         line: usize,
+        /// Column of the error, 1-based.
         column: usize,
+        /// The parser's message.
         problem: String,
     },
     /// A JSON value is missing, has the wrong type or an unusable value.
     #[error("{}: key {key}: {problem}", path.display())]
     Field {
+        /// The JSON file.
         path: PathBuf,
         /// JSON pointer to the value, e.g. `/7/cam_R_w2c`.
         key: String,
+        /// What is wrong with the value.
         problem: String,
     },
     /// A line of a plain-text file (ROBI's `list.txt`, a camera `.yml`) is unusable.
     #[error("{}: line {line}: {problem}", path.display())]
     Line {
+        /// The text file.
         path: PathBuf,
+        /// The offending line, 1-based.
         line: usize,
+        /// What is wrong with it.
         problem: String,
     },
     /// An image file could not be decoded.
     #[error("{}: cannot decode the image", path.display())]
     ImageDecode {
+        /// The image file.
         path: PathBuf,
+        /// The decoder's error.
         #[source]
         source: image::ImageError,
     },
     /// An image could not be encoded for writing.
     #[error("{}: cannot encode the image as PNG", path.display())]
     ImageEncode {
+        /// The image file to be written.
         path: PathBuf,
+        /// The encoder's error.
         #[source]
         source: image::ImageError,
     },
     /// A record could not be encoded as JSON (a writer bug: Glint's records always encode).
     #[error("{}: cannot encode the record as JSON (a bug in Glint's writer)", path.display())]
     JsonEncode {
+        /// The JSON file to be written.
         path: PathBuf,
+        /// The encoder's error.
         #[source]
         source: serde_json::Error,
     },
     /// An image decoded, but is not what the file must hold (bit depth, channels, size).
     #[error("{}: {problem}", path.display())]
-    ImageContent { path: PathBuf, problem: String },
+    ImageContent {
+        /// The image file.
+        path: PathBuf,
+        /// What is wrong with its content.
+        problem: String,
+    },
     /// A pixel cannot be stored in the file's format (depth beyond the 16-bit range, say).
     #[error("{}: pixel ({u}, {v}): {problem}", path.display())]
     Pixel {
+        /// The image file to be written.
         path: PathBuf,
+        /// Column of the pixel, px.
         u: u32,
+        /// Row of the pixel, px.
         v: u32,
+        /// Why its value cannot be stored.
         problem: String,
     },
     /// The caller asked for something the file at `path` cannot take or does not have.
     #[error("{}: {problem}", path.display())]
-    Invalid { path: PathBuf, problem: String },
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What was asked that it cannot take or does not have.
+        problem: String,
+    },
     /// An output file could not be written; the message names it.
     #[error(transparent)]
     Write(#[from] AtomicWriteError),

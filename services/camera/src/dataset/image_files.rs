@@ -17,7 +17,9 @@ use super::transforms::MM_PER_M;
 /// One camera of a rectified stereo pair: the left one is the reference (DESIGN.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum StereoSide {
+    /// The left camera, whose frame depth and poses refer to.
     Left,
+    /// The right camera, offset by the baseline along the left camera's +x.
     Right,
 }
 
@@ -36,7 +38,9 @@ impl StereoSide {
 /// business; the file keeps the integers exactly.
 #[derive(Clone, Debug, PartialEq)]
 pub enum PatternImage {
+    /// 8-bit digital numbers.
     Bits8(Image<u8>),
+    /// 16-bit digital numbers.
     Bits16(Image<u16>),
 }
 

@@ -26,7 +26,9 @@ use crate::bin::BinSpec;
 /// The reference surface: the bin and its known material.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ReferenceSurface {
+    /// The bin's geometry, metres.
     pub bin: BinSpec,
+    /// The principled BSDF parameters of the bin's surface, each in [0, 1].
     pub material: PrincipledParams<f32>,
 }
 

@@ -16,8 +16,11 @@ pub enum GtInfoError {
         "masks and depth must have the same size: full mask {full_px:?} px, visible mask {visible_px:?} px, depth {depth_px:?} px"
     )]
     SizeMismatch {
+        /// Full mask's `(width, height)`, px.
         full_px: (u32, u32),
+        /// Visible mask's `(width, height)`, px.
         visible_px: (u32, u32),
+        /// Depth map's `(width, height)`, px, when one was given.
         depth_px: Option<(u32, u32)>,
     },
 }
@@ -34,6 +37,7 @@ pub struct BopGt {
 /// One instance's entry of `scene_gt.json`, exactly as in the file (row-major, mm).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SceneGtEntry {
+    /// The model, `models/obj_XXXXXX.ply`.
     pub obj_id: u32,
     /// Object → camera rotation, row-major.
     #[serde(rename = "cam_R_m2c")]
@@ -44,6 +48,7 @@ pub struct SceneGtEntry {
 }
 
 impl SceneGtEntry {
+    /// The file entry of `gt`: metres to millimetres, rotation to row-major.
     pub fn from_gt(gt: &BopGt) -> Self {
         let (cam_r_m2c, cam_t_m2c) = rotation_and_mm_from_isometry(&gt.t_c_o);
         Self {
@@ -70,9 +75,13 @@ impl BopGt {
 /// BOP's `bbox_obj` may reach beyond the image, so the corner may be negative.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PixelBox {
+    /// Column of the first pixel, px.
     pub x: i64,
+    /// Row of the first pixel, px.
     pub y: i64,
+    /// Width, px (≥ 0).
     pub width: i64,
+    /// Height, px (≥ 0).
     pub height: i64,
 }
 
@@ -136,14 +145,20 @@ pub struct BopGtInfo {
 pub struct GtInfoEntry {
     /// `[x, y, w, h]` px, `[-1, -1, -1, -1]` for none.
     pub bbox_obj: [i64; 4],
+    /// `[x, y, w, h]` px of the visible part, `[-1, -1, -1, -1]` for none.
     pub bbox_visib: [i64; 4],
+    /// [`BopGtInfo::px_count_all`].
     pub px_count_all: u64,
+    /// [`BopGtInfo::px_count_valid`].
     pub px_count_valid: u64,
+    /// [`BopGtInfo::px_count_visib`].
     pub px_count_visib: u64,
+    /// [`BopGtInfo::visib_fract`], in [0, 1].
     pub visib_fract: f64,
 }
 
 impl GtInfoEntry {
+    /// The file entry of `info` (`None` boxes become `[-1, -1, -1, -1]`).
     pub fn from_info(info: &BopGtInfo) -> Self {
         Self {
             bbox_obj: PixelBox::to_bop(info.bbox_obj),

@@ -92,6 +92,7 @@ impl BopSceneLayout {
         }
     }
 
+    /// The scene directory, `<split>/XXXXXX/`.
     pub fn scene_dir(&self) -> &Path {
         &self.scene_dir
     }
@@ -104,24 +105,31 @@ impl BopSceneLayout {
         self.scene_dir.join(format!("{name}{}", self.suffix))
     }
 
+    /// `scene_camera.json`: per-image intrinsics, depth scale and camera pose.
     pub fn scene_camera_json(&self) -> PathBuf {
         self.json("scene_camera")
     }
+    /// `scene_gt.json`: per-image ground-truth object poses, evaluation only.
     pub fn scene_gt_json(&self) -> PathBuf {
         self.json("scene_gt")
     }
+    /// `scene_gt_info.json`: per-instance boxes and visibility, evaluation only.
     pub fn scene_gt_info_json(&self) -> PathBuf {
         self.json("scene_gt_info")
     }
+    /// `depth/`: 16-bit depth PNGs.
     pub fn depth_dir(&self) -> PathBuf {
         self.dir("depth")
     }
+    /// `gray/`: grey-level images.
     pub fn gray_dir(&self) -> PathBuf {
         self.dir("gray")
     }
+    /// `rgb/`: colour images.
     pub fn rgb_dir(&self) -> PathBuf {
         self.dir("rgb")
     }
+    /// `mask/` or `mask_visib/`: ground-truth silhouettes, evaluation only.
     pub fn mask_dir(&self, kind: MaskKind) -> PathBuf {
         match kind {
             MaskKind::Full => self.dir("mask"),

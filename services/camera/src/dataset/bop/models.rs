@@ -33,6 +33,7 @@ pub struct ModelInfo {
     /// Axis-aligned bounding box in the object frame, metres (BOP's `min_x`..., `size_x`...);
     /// `None` when the file gives none.
     pub bbox: Option<ModelBox>,
+    /// The model's symmetries (BOP's `symmetries_discrete`, `symmetries_continuous`).
     pub symmetry: ModelSymmetry,
 }
 
@@ -64,7 +65,9 @@ pub struct ModelSymmetry {
 /// Rotations by any angle about `axis` through the point `offset_m` (object frame, metres).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ContinuousSymmetry {
+    /// Direction of the rotation axis, object frame (BOP's `axis`).
     pub axis: Unit<Vector3<f64>>,
+    /// A point on the axis, object frame, metres (BOP's `offset`, read from mm).
     pub offset_m: Vector3<f64>,
 }
 

@@ -108,6 +108,7 @@ impl BopSceneReader {
         self
     }
 
+    /// Where the scene's files are.
     pub fn layout(&self) -> &BopSceneLayout {
         &self.layout
     }

@@ -70,6 +70,7 @@ impl BopSceneWriter {
         })
     }
 
+    /// Where the scene's files are written.
     pub fn layout(&self) -> &BopSceneLayout {
         &self.layout
     }

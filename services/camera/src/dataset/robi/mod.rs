@@ -58,7 +58,9 @@ const GLINT_MINUS_OPENCV_PX: f64 = 0.5;
 /// The two sensors of ROBI, and their directory names.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum RobiSensor {
+    /// The Ensenso N35 structured-light stereo camera (`Ensenso/`).
     Ensenso,
+    /// The Intel RealSense depth camera (`RealSense/`).
     RealSense,
 }
 
@@ -75,6 +77,7 @@ impl RobiSensor {
 /// A depth camera of ROBI: intrinsics (Glint's pixel convention) and depth unit.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RobiDepthCamera {
+    /// The depth image's pinhole intrinsics, px, Glint's pixel convention (OpenCV's + 0.5).
     pub intrinsics: PinholeIntrinsics,
     /// Millimetres per unit of the 16-bit depth files.
     pub depth_unit_mm: f64,
@@ -186,6 +189,7 @@ pub struct RobiObjectPose {
 /// One object instance seen from one view.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RobiViewGt {
+    /// Its key in `GT_world2obj.json`, e.g. `Object_3`.
     pub name: String,
     /// Object → depth camera, metres: `t_c_o = t_w_c⁻¹ · t_w_o`.
     pub t_c_o: Isometry3<f64>,
@@ -227,10 +231,12 @@ impl RobiSceneReader {
         })
     }
 
+    /// The scene directory, `<root>/<Object>/Scene_<n>/`.
     pub fn scene_dir(&self) -> &Path {
         &self.scene_dir
     }
 
+    /// The sensor's depth camera, as given to [`Self::open`].
     pub fn camera(&self) -> &RobiDepthCamera {
         &self.camera
     }
