@@ -5,6 +5,7 @@
 //! `glint-eval` looks.
 
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
+#![warn(missing_docs)]
 
 pub mod local;
 #[cfg(feature = "server")]

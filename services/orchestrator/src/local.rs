@@ -25,6 +25,8 @@ use glint_uncertainty::{
 
 /// The mock structured-light camera looking at a bin of parts.
 pub struct MockCamera {
+    /// The simulated bin, rig and capture settings (its part poses are the truth no session
+    /// reads).
     pub setup: BinSetup,
 }
 
@@ -77,6 +79,8 @@ impl CameraStage for MockCamera {
 
 /// SDF grids built once per mesh, keyed by the mesh's content hash, with the refiner's voxel.
 pub struct SdfCache {
+    /// How grids are built: by default the refiner's voxel
+    /// ([`glint_estimation::refine::REFINE_SDF_VOXEL_MM`]).
     pub config: SdfConfig,
     grids: Mutex<HashMap<String, Arc<SdfGrid>>>,
 }
@@ -120,8 +124,11 @@ impl SdfCache {
 /// The estimator in-process.
 #[derive(Default)]
 pub struct LocalEstimation {
+    /// The SDF refiner's settings.
     pub refine: SdfRefineConfig,
+    /// The Gaussian pose prior added to every information before its entropy (eq 20, 23).
     pub prior: PosePrior,
+    /// The session objects' SDF grids.
     pub grids: SdfCache,
 }
 
@@ -132,6 +139,7 @@ pub struct LocalPrediction {
     /// Thresholds and render settings; the request's σ model, seed and maps override theirs,
     /// the object's camera its shots and window.
     pub settings: PredictionSettings,
+    /// The session objects' SDF grids.
     pub grids: SdfCache,
 }
 

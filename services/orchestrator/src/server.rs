@@ -34,6 +34,8 @@ pub struct OrchestratorServer {
 }
 
 impl OrchestratorServer {
+    /// The gRPC face of `orchestrator`, whose errors it answers with [`status_of`]'s
+    /// statuses.
     pub fn new(orchestrator: Arc<Orchestrator>) -> Self {
         Self { orchestrator }
     }

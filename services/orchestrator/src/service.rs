@@ -34,22 +34,34 @@ pub enum PartSource {
     /// One of Glint's parts.
     Builtin(Part),
     /// A user's mesh, metres.
-    Mesh { name: String, mesh: TriMesh },
+    Mesh {
+        /// Its name for logs and reports; a built-in part's name also selects that part's
+        /// shipped calibration when none is sent.
+        name: String,
+        /// The mesh, metres, in the object's frame.
+        mesh: TriMesh,
+    },
 }
 
 /// What a client starts a session with.
 #[derive(Clone, Debug)]
 pub struct SessionRequest {
+    /// The part to refine.
     pub part: PartSource,
     /// The detector's pose, object → world.
     pub initial_t_w_o: Isometry3<f64>,
     /// Candidate left-camera poses (camera → world): `Ok` the client's list, `Err(n)` the
     /// camera's own `n` views.
     pub candidates: Result<Vec<Isometry3<f64>>, usize>,
+    /// Index into the candidates of the first capture (the detector's view).
     pub first_view: usize,
+    /// How the views after the first are chosen.
     pub policy: ViewPolicy,
+    /// Views at most, 1 to 64.
     pub max_views: usize,
+    /// Stop once the pose entropy is below this, nats; `None`: only the budget stops.
     pub entropy_threshold_nats: Option<f64>,
+    /// Seed of the captures' noise, the predictions' renders and the random policy.
     pub seed: u64,
     /// The part's calibration; `None`: the one Glint ships for a built-in part, if any.
     pub calibration: Option<PartCalibration>,
@@ -57,10 +69,15 @@ pub struct SessionRequest {
 
 /// The orchestrator: its stages, what it knows of the cell, and its sessions.
 pub struct Orchestrator {
+    /// The camera every session captures with.
     pub camera: Arc<dyn CameraStage>,
+    /// The estimator: refinement, entropy and planning.
     pub estimation: Arc<dyn EstimationStage>,
+    /// The render workers, used by the entropy policies.
     pub prediction: Arc<dyn PredictionStage>,
+    /// What the orchestrator knows of the cell: surroundings and floor.
     pub cell: Cell,
+    /// How sessions started from now on find the part's pixels.
     pub masking: Masking,
     store: Arc<dyn SessionStore>,
     /// The sensor's noise, calibrated at the first session that needs it.
@@ -84,6 +101,8 @@ pub const OVERLOADED_RETRY_AFTER_MS: u64 = 1000;
 pub const DEFAULT_CANDIDATES: usize = 20;
 
 impl Orchestrator {
+    /// An orchestrator over these stages, `cell` and `store`, running at most
+    /// [`DEFAULT_MAX_RUNNING`] sessions at once; new ids follow the highest the store holds.
     pub fn new(
         camera: Arc<dyn CameraStage>,
         estimation: Arc<dyn EstimationStage>,
@@ -332,6 +351,7 @@ impl Orchestrator {
         self.presented(session)
     }
 
+    /// Every session without its captures, oldest first.
     pub fn list(&self) -> Result<Vec<Session>, StageError> {
         self.store
             .list()?

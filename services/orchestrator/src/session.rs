@@ -28,6 +28,7 @@ pub enum ViewPolicy {
 }
 
 impl ViewPolicy {
+    /// Every policy.
     pub const ALL: [ViewPolicy; 4] = [
         ViewPolicy::Nbv,
         ViewPolicy::NbvConstSigma,
@@ -35,6 +36,8 @@ impl ViewPolicy {
         ViewPolicy::MaxDistance,
     ];
 
+    /// The policy's name on the command line, in reports and in serde (`nbv`,
+    /// `nbv-const-sigma`, `random`, `max-distance`); [`std::str::FromStr`] parses it back.
     pub fn name(self) -> &'static str {
         match self {
             ViewPolicy::Nbv => "nbv",
@@ -44,7 +47,8 @@ impl ViewPolicy {
         }
     }
 
-    /// The prediction this policy needs, if any.
+    /// The prediction this policy needs, if any: `const_sigma_z_m` (metres) is the constant
+    /// σ_z of [`ViewPolicy::NbvConstSigma`].
     pub fn prediction(self, const_sigma_z_m: f64) -> Option<PredictionSigma> {
         match self {
             ViewPolicy::Nbv => Some(PredictionSigma::Rendered),
@@ -77,6 +81,7 @@ pub struct SessionConfig {
     pub candidates: Vec<Isometry3<f64>>,
     /// The candidate the first capture is taken from (the detector's view).
     pub first_view: usize,
+    /// How the views after the first are chosen.
     pub policy: ViewPolicy,
     /// Views at most, 1 to 64.
     pub max_views: usize,
@@ -84,6 +89,7 @@ pub struct SessionConfig {
     pub entropy_threshold_nats: Option<f64>,
     /// Seed of the captures' noise, the predictions' renders and the random policy.
     pub seed: u64,
+    /// The refinement's settings (masks, known background, σ_z model).
     pub refine: RefineSettings,
     /// σ_z of the constant-σ policy's predictions, metres.
     pub const_sigma_z_m: f64,
@@ -93,8 +99,9 @@ pub struct SessionConfig {
 /// orchestrator's sessions do it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Masking {
-    /// The hypothesis silhouette's margin, then the second pass's, metres.
+    /// The margin around the hypothesis' silhouette in the first pass, metres.
     pub margin_m: f64,
+    /// The margin around the first pass's silhouette in the second pass, metres.
     pub final_margin_m: f64,
     /// Points this close to the cell's known floor are dropped, metres.
     pub floor_clearance_m: f64,
@@ -140,6 +147,7 @@ pub const CONST_SIGMA_Z_M: f64 = 0.5e-3;
 /// are not the part.
 #[derive(Clone, Debug)]
 pub struct Cell {
+    /// Known static surfaces (the bin), rendered with the part by the render workers.
     pub surroundings: Vec<glint_uncertainty::KnownSurface>,
     /// The floor, world frame (`clearance_m` is set by [`Masking`]).
     pub floor: Option<glint_estimation::view::BackgroundPlane>,
@@ -171,7 +179,9 @@ impl Cell {
     }
 }
 
-/// Why a session's configuration is unusable.
+/// Why a session's configuration is unusable: [`StageError::InvalidArgument`] naming the
+/// first field out of range (e.g. a pose not finite, `first_view` not a candidate, not 1 to
+/// 64 views, a margin not 0 to 0.1 m).
 pub fn validate(config: &SessionConfig) -> Result<(), StageError> {
     let finite = |t: &Isometry3<f64>| {
         t.translation.vector.iter().all(|c| c.is_finite())
@@ -252,13 +262,18 @@ pub fn validate(config: &SessionConfig) -> Result<(), StageError> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SessionState {
+    /// Created and not yet run.
     Created,
+    /// Being run (a stored session held as running that no thread runs is shown as
+    /// [`SessionState::Interrupted`]).
     Running,
     /// Ended by the entropy threshold.
     Converged,
     /// Ended by the view budget (or no candidate left).
     BudgetSpent,
+    /// Ended by a cancel, before or while it ran.
     Cancelled,
+    /// Ended by an error; [`Session::error`] says which.
     Failed,
     /// Held as running by the store, but the orchestrator that ran it stopped (a crash, a
     /// restart): running it again resumes it after its last completed step. Only shown,
@@ -267,6 +282,8 @@ pub enum SessionState {
 }
 
 impl SessionState {
+    /// Whether the session has ended (converged, budget spent, cancelled or failed): running
+    /// it again does nothing.
     pub fn is_final(self) -> bool {
         matches!(
             self,
@@ -281,24 +298,36 @@ impl SessionState {
 /// Time per stage of a step, milliseconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StageTimes {
+    /// The capture, as the camera reports it; 0 when a resumed session already held it.
     pub capture_ms: f64,
+    /// The refinement on every view so far.
     pub refine_ms: f64,
+    /// Predicting the open candidates; 0 when the policy predicts nothing or the session
+    /// ended.
     pub predict_ms: f64,
+    /// Choosing the next view; 0 when the session ended.
     pub plan_ms: f64,
 }
 
 /// One completed step: a view taken and the pose refined on all views so far.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepRecord {
+    /// The step's number, from 0.
     pub step: usize,
-    /// Index into the candidates of the view taken, and its pose.
+    /// Index into the candidates of the view taken.
     pub view: usize,
+    /// The view's left-camera pose, camera → world.
     pub t_w_c: Isometry3<f64>,
-    /// Part points of this view and of all views.
+    /// Part points of this view.
     pub view_points: usize,
+    /// Part points of all views so far.
     pub total_points: usize,
+    /// The refined pose, object → world.
     pub t_w_o: Isometry3<f64>,
+    /// Fisher information of the pose over all views so far (eq 18), without the planner's
+    /// prior; zero when the refinement diverged.
     pub information: Matrix6<f64>,
+    /// The pose covariance, `information⁻¹` (eq 18); `None` when singular or diverged.
     pub covariance: Option<Matrix6<f64>>,
     /// Pose entropy after this step (planner's prior included), nats.
     pub entropy_nats: f64,
@@ -311,22 +340,31 @@ pub struct StepRecord {
     pub candidate_entropies_nats: Vec<Option<f64>>,
     /// The view chosen next, if the session goes on.
     pub next_view: Option<usize>,
+    /// Time each stage of this step took, milliseconds.
     pub times: StageTimes,
 }
 
 /// A session: its configuration, its steps and its captures.
 #[derive(Clone, Debug)]
 pub struct Session {
+    /// Its id (an orchestrator's are [`crate::store::id_of`]'s, `s000042`).
     pub id: String,
+    /// What it was started with (validated).
     pub config: SessionConfig,
+    /// Where it is.
     pub state: SessionState,
+    /// Its completed steps, in order.
     pub steps: Vec<StepRecord>,
+    /// Its captures, one per step captured (a step may be captured and not completed);
+    /// empty when read without captures.
     pub views: Vec<CapturedView>,
     /// Why it failed.
     pub error: Option<String>,
 }
 
 impl Session {
+    /// A new session (created, no steps), or the [`StageError::InvalidArgument`] of
+    /// [`validate`].
     pub fn new(id: String, config: SessionConfig) -> Result<Self, StageError> {
         validate(&config)?;
         Ok(Self {
@@ -354,7 +392,9 @@ impl Session {
 
 /// The stages a session runs on.
 pub struct Stages<'a> {
+    /// The camera the session captures with.
     pub camera: &'a dyn CameraStage,
+    /// The estimator: refinement, entropy and the entropy policies' plan (eq 20, 23).
     pub estimation: &'a dyn EstimationStage,
     /// The render workers with the object they predict for; required by the entropy policies.
     pub prediction: Option<(&'a dyn PredictionStage, &'a PredictionObject)>,

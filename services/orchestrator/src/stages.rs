@@ -18,37 +18,50 @@ use nalgebra::{Isometry3, Matrix6};
 /// differently (and what gRPC codes map to).
 #[derive(Clone, Debug, thiserror::Error, PartialEq)]
 pub enum StageError {
-    /// The request is wrong: fix `field`.
+    /// The request is wrong: fix `field` (INVALID_ARGUMENT over gRPC).
     #[error("{field}: {message}")]
-    InvalidArgument { field: String, message: String },
-    /// The stage lacks something it must be given first (e.g. an object by its hash).
+    InvalidArgument {
+        /// The request's field at fault, as a path (`candidates_t_w_c[2]`,
+        /// `refine.mask_margin_m`).
+        field: String,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// The stage lacks something it must be given first (e.g. an object by its hash), or
+    /// the session named is unknown (NOT_FOUND).
     #[error("not found: {0}")]
     NotFound(String),
-    /// The request is valid but the data cannot give an answer (e.g. too few points).
+    /// The request is valid but the data cannot give an answer (e.g. too few points)
+    /// (FAILED_PRECONDITION).
     #[error("{0}")]
     FailedPrecondition(String),
-    /// The stage could not be reached or did not answer in time; another replica may.
+    /// The stage could not be reached or did not answer in time; another replica may
+    /// (UNAVAILABLE).
     #[error("unavailable: {0}")]
     Unavailable(String),
-    /// The session was cancelled.
+    /// The session was cancelled (CANCELLED).
     #[error("cancelled")]
     Cancelled,
-    /// Too much work is under way: try again after `retry_after_ms`.
+    /// Too much work is under way: try again after `retry_after_ms` (RESOURCE_EXHAUSTED
+    /// with gRPC's retry pushback).
     #[error("{message} (retry after {retry_after_ms} ms)")]
     Overloaded {
+        /// What is at its bound.
         message: String,
+        /// How long to wait before asking again, milliseconds.
         retry_after_ms: u64,
     },
     /// Kept data is damaged or missing (a session store's record or blob): nothing is
-    /// served from it.
+    /// served from it (DATA_LOSS).
     #[error("data loss: {0}")]
     DataLoss(String),
-    /// Anything else.
+    /// Anything else (INTERNAL).
     #[error("{0}")]
     Internal(String),
 }
 
 impl StageError {
+    /// An [`StageError::InvalidArgument`]: `field` is wrong, `message` says how.
     pub fn invalid(field: impl Into<String>, message: impl Into<String>) -> Self {
         Self::InvalidArgument {
             field: field.into(),
@@ -90,6 +103,8 @@ pub struct CameraInfo {
 /// A capture as the session receives it.
 #[derive(Clone, Debug)]
 pub struct CapturedView {
+    /// The view: pose `t_w_c` (left camera → world), rectified rig, depth, pattern shots and
+    /// noise shots.
     pub measurement: ViewMeasurement,
     /// Time the camera took, milliseconds.
     pub capture_ms: f64,
@@ -97,6 +112,7 @@ pub struct CapturedView {
 
 /// The structured-light camera (mock or real).
 pub trait CameraStage: Send + Sync {
+    /// The camera's rig, read-out and pattern settings.
     fn info(&self) -> Result<CameraInfo, StageError>;
     /// A capture from left-camera pose `t_w_c`, with two noise shots for σ_I. `seed` drives a
     /// simulator's noise (a real camera ignores it).
@@ -151,13 +167,19 @@ pub struct CandidateInformation {
     pub index: u32,
     /// The Fisher information this view would add (eq 18, 21–22).
     pub information: Matrix6<f64>,
+    /// Left-image pixels on the part under the hypothesis (its visible silhouette).
     pub part_pixels: u32,
+    /// Part pixels predicted to give a depth: the points of `information`.
     pub predicted_points: u32,
+    /// Part pixels predicted missing by the ratio test (eq 16).
     pub missing_ratio: u32,
+    /// Part pixels predicted missing by the σ test (eq 17), the ratio test passed.
     pub missing_sigma: u32,
+    /// The part projects outside the candidate's image (or behind it); the counts are zero.
     pub not_in_view: bool,
     /// The predicted σ̌_z map and each pixel's cause over the region of interest, when asked.
     pub maps: Option<PredictedMaps>,
+    /// Time this candidate's prediction took, milliseconds.
     pub predict_ms: f64,
 }
 
@@ -168,8 +190,9 @@ pub struct PredictedMaps {
     pub sigma_z_m: Image<f32>,
     /// Why: a [`glint_uncertainty::PixelCause`] per pixel, as its `u8`.
     pub cause: Image<u8>,
-    /// The region's top-left pixel in the camera's image.
+    /// Column of the region's top-left pixel in the left camera's image, px.
     pub roi_u0_px: u32,
+    /// Row of the region's top-left pixel in the left camera's image, px.
     pub roi_v0_px: u32,
 }
 
@@ -179,7 +202,10 @@ pub enum PredictionSigma {
     /// Rendering-based σ̌_z and missing pixels (eq 14–17), the paper's method.
     Rendered,
     /// A constant σ_z, metres, on every visible part pixel (the constant-σ baseline).
-    Constant { sigma_z_m: f64 },
+    Constant {
+        /// The constant σ_z, metres (positive).
+        sigma_z_m: f64,
+    },
 }
 
 /// What the render workers are asked for one decision.
@@ -189,6 +215,7 @@ pub struct PredictionRequest {
     pub t_w_o: Isometry3<f64>,
     /// `(index into the session's candidates, left camera → world)`.
     pub candidates: Vec<(u32, Isometry3<f64>)>,
+    /// How depth uncertainty is modelled.
     pub sigma: PredictionSigma,
     /// Seed of the renders; each candidate's is derived from it and its index, so any
     /// worker gives the same answer.
@@ -201,20 +228,23 @@ pub struct PredictionRequest {
 /// only what calibration measured.
 #[derive(Clone, Debug)]
 pub struct PredictionObject {
+    /// The part: its name, mesh and mesh hash (the workers' cache key).
     pub object: SessionObject,
     /// The fitted material (`glint calibrate bsdf`).
     pub material: glint_render::bsdf::PrincipledParams<f32>,
     /// The calibrated response and radiometric scale (`glint calibrate response`, `bsdf`).
     pub camera: glint_uncertainty::CalibratedCamera,
+    /// The camera's full rig (cameras and projector).
     pub rig: glint_render::rig::SliRig,
     /// The sensor's noise, fitted from a view's noise shots.
     pub noise: glint_estimation::depth_sigma::NoiseModel,
     /// Known surroundings rendered with the part (the bin), empty for the part alone.
     pub surroundings: Vec<glint_uncertainty::KnownSurface>,
-    /// The camera's pattern shots per capture, the patterns' lit fraction, and the matching
-    /// window radius, px.
+    /// The camera's pattern shots per capture.
     pub shots: u32,
+    /// Fraction of lit projector pixels in the random-dot patterns.
     pub pattern_fill: f64,
+    /// The stereo matcher's window radius, px.
     pub window_radius_px: u32,
 }
 
@@ -318,6 +348,8 @@ impl PredictionObject {
 /// The render workers: candidate-view prediction. Stateless towards the caller: every call
 /// names its object, which an implementation may cache by content hash.
 pub trait PredictionStage: Send + Sync {
+    /// Predicts what each of `request`'s candidates would add for `object` (eq 14–17,
+    /// 21–22): one [`CandidateInformation`] per candidate, named by its index.
     fn predict(
         &self,
         object: &PredictionObject,

@@ -42,6 +42,7 @@ impl RemoteCamera {
         })
     }
 
+    /// The camera server's address, deadline and security.
     pub fn endpoint(&self) -> &Endpoint {
         &self.endpoint
     }

@@ -30,6 +30,7 @@ use crate::stages::{
 pub struct RemoteEstimation {
     /// The runtime the calls run on (never block on it from one of its own tasks).
     pub handle: Handle,
+    /// The estimation server's address, deadline and security.
     pub endpoint: Endpoint,
     client: EstimationServiceClient<AuthChannel>,
     /// The service's key of each session object's mesh, once registered (the service keys a

@@ -31,10 +31,13 @@ pub struct Endpoint {
 }
 
 impl Endpoint {
+    /// The server at `uri`, every call due within `deadline`, with neither token nor TLS.
     pub fn new(uri: &str, deadline: Duration) -> Self {
         Self::secured(uri, deadline, ClientSecurity::default())
     }
 
+    /// The server at `uri` called with `security`'s token and TLS; a bare `host:port` gets
+    /// `https://` with TLS, else `http://`.
     pub fn secured(uri: &str, deadline: Duration, security: ClientSecurity) -> Self {
         Self {
             uri: security.uri(uri),
@@ -89,14 +92,16 @@ pub fn when_admitted<T>(
     }
 }
 
-/// What a failed call means to a session. INVALID_ARGUMENT messages start with the field
-/// (`field: message`, as every Glint server writes them).
 pub use glint_server::load::RETRY_PUSHBACK_KEY;
 use glint_server::load::{retry_pushback, with_retry_pushback};
 
 /// The wait after a RESOURCE_EXHAUSTED that names none, ms.
 const DEFAULT_RETRY_AFTER_MS: u64 = 500;
 
+/// What a failed call means to a session. INVALID_ARGUMENT messages start with the field
+/// (`field: message`, as every Glint server writes them); RESOURCE_EXHAUSTED is
+/// [`StageError::Overloaded`] with the status's retry pushback (500 ms without one);
+/// DEADLINE_EXCEEDED and ABORTED are [`StageError::Unavailable`], like UNAVAILABLE.
 pub fn stage_error(status: &tonic::Status) -> StageError {
     let message = status.message().to_owned();
     match status.code() {

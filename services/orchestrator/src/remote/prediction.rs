@@ -125,8 +125,9 @@ pub struct PoolStats {
     /// Answers refused as invalid (wrong candidates, a Fisher information that is not a
     /// finite symmetric positive semi-definite matrix); their candidates were re-sent.
     pub rejected: usize,
-    /// Bytes of the requests and responses' messages (protobuf encoded), both ways.
+    /// Bytes of the answered PredictCandidates requests (protobuf encoded).
     pub request_bytes: usize,
+    /// Bytes of their responses (protobuf encoded).
     pub response_bytes: usize,
 }
 
@@ -143,6 +144,7 @@ struct Worker {
 pub struct RemotePrediction {
     handle: Handle,
     source: WorkerSource,
+    /// How decisions are spread over the workers, and their deadlines.
     pub config: PoolConfig,
     /// The token and TLS settings of the calls to workers.
     security: ClientSecurity,
@@ -199,6 +201,9 @@ enum TaskEnd {
 }
 
 impl RemotePrediction {
+    /// A pool of the workers `source` names, called through `handle`'s runtime (which must
+    /// outlive it), with neither token nor TLS until [`Self::with_security`]. Nothing is
+    /// resolved or connected before the first decision.
     pub fn new(handle: Handle, source: WorkerSource, config: PoolConfig) -> Self {
         Self {
             handle,

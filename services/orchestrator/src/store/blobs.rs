@@ -9,12 +9,32 @@ use std::path::{Path, PathBuf};
 /// Why a blob could not be written or read.
 #[derive(Debug, thiserror::Error)]
 pub enum BlobError {
+    /// The file system failed; a session store's calls report it as
+    /// [`crate::stages::StageError::Internal`].
     #[error("{path}: {message}")]
-    Io { path: String, message: String },
+    Io {
+        /// The file or folder.
+        path: String,
+        /// The system's error.
+        message: String,
+    },
+    /// No blob has the name; a session store's calls report data loss
+    /// ([`crate::stages::StageError::DataLoss`]).
     #[error("blob {path} is missing")]
-    Missing { path: String },
+    Missing {
+        /// Where it should be.
+        path: String,
+    },
+    /// The blob's bytes do not hash to its name (damaged or truncated); a session store's
+    /// calls report data loss ([`crate::stages::StageError::DataLoss`]).
     #[error("blob {path} is damaged: its bytes hash to {actual}, not to its name")]
-    Damaged { path: String, actual: String },
+    Damaged {
+        /// The blob's file.
+        path: String,
+        /// The SHA-256 of its bytes, lowercase hex.
+        actual: String,
+    },
+    /// The name given (shown) is not 64 lowercase hex digits.
     #[error("{0:?} is not a blob name (64 lowercase hex digits)")]
     BadName(String),
 }

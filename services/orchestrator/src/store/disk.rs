@@ -60,22 +60,35 @@ impl SessionRecord {
 /// Why a state directory cannot be used. Each says what to do.
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
+    /// The database cannot be created or read: restore it from a backup, or move the state
+    /// directory aside.
     #[error(
         "the session store {path} cannot be opened: {reason}. It is damaged or not a Glint \
          state file: restore it from a backup, or move the state directory aside to start \
          with no sessions"
     )]
-    Open { path: String, reason: String },
+    Open {
+        /// The database file.
+        path: String,
+        /// What failed.
+        reason: String,
+    },
+    /// A session's record is damaged (checksum, parse, format, id) or names a missing blob:
+    /// restore the state directory from a backup, or move it aside.
     #[error(
         "the session store {path} is damaged: session {id}: {reason}. Nothing was served \
          from it: restore the state directory from a backup, or move it aside to start with no \
          sessions"
     )]
     Record {
+        /// The database file.
         path: String,
+        /// The session's id.
         id: String,
+        /// What is wrong with its record.
         reason: String,
     },
+    /// The blob directory cannot be opened or cleaned of a crash's temporary files.
     #[error("the session store's blob directory: {0}")]
     Blobs(#[from] BlobError),
 }

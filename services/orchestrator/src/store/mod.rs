@@ -24,7 +24,9 @@ use crate::stages::{CapturedView, PartCalibration, SessionObject, StageError};
 /// the camera's rig, exposure and shots, the cell's surroundings — is the orchestrator's.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SessionCalibration {
+    /// The part's material, response and radiometric scale.
     pub part: PartCalibration,
+    /// The sensor's noise σ_I² (eq 2), fitted when the session started.
     pub noise: NoiseModel,
 }
 
@@ -32,8 +34,11 @@ pub struct SessionCalibration {
 /// its predictions need.
 #[derive(Clone, Debug)]
 pub struct StoredSession {
+    /// The session, its captures included.
     pub session: Session,
+    /// The part it refines.
     pub object: SessionObject,
+    /// What its predictions need; `None` for a policy that predicts nothing.
     pub calibration: Option<SessionCalibration>,
 }
 
