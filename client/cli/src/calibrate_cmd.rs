@@ -10,10 +10,10 @@ use std::time::Instant;
 use anyhow::Context;
 use glint_calibration::bsdf_fit::scene_fit::{
     Capture, CaptureReadError, CaptureReader, CaptureView, LossChoice, SceneFitConfig, fit_scene,
-    fit_views, read_capture, rendering_of,
+    fit_views, read_capture,
 };
 use glint_calibration::bsdf_fit::{
-    FitProblem, Loss, PixelRendering, Residual, error_map_png, fit_history_png, free_of,
+    FitProblem, Loss, Residual, error_map_png, fit_history_png, free_of,
 };
 use glint_calibration::material_file::{GroundTruthMaterials, MaterialFile, MaterialFileError};
 use glint_calibration::response::{
@@ -21,6 +21,7 @@ use glint_calibration::response::{
 };
 use glint_geometry::io::write_file_atomically;
 use glint_render::bsdf::PrincipledParams;
+use glint_render::integrator::PixelRendering;
 use glint_render::integrator::{LightTransport, path_pixel};
 use glint_render::projector::Pattern;
 use glint_render::sensor::ResponseCurve;
@@ -464,23 +465,13 @@ fn part_radiance(
     let (w, h) = (camera.intrinsics.width_px, camera.intrinsics.height_px);
     let is_part_instance = |i: u32| loaded.part_instances.contains(&i);
     let shade = |u, v, m: &PrincipledParams<f32>, r: &PixelRendering| {
-        path_pixel(
-            &loaded.scene,
-            &camera,
-            &projector,
-            u,
-            v,
-            r.transport,
-            r.samples_per_pixel,
-            r.seed,
-            |i| {
-                if is_part_instance(i) {
-                    *m
-                } else {
-                    *loaded.scene.material_of(i)
-                }
-            },
-        )
+        path_pixel(&loaded.scene, &camera, &projector, (u, v), r, |i| {
+            if is_part_instance(i) {
+                *m
+            } else {
+                *loaded.scene.material_of(i)
+            }
+        })
     };
     let first_hits: Vec<bool> = (0..w * h)
         .into_par_iter()
@@ -584,7 +575,7 @@ fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
         .collect();
     evaluated.push((format!("held-out view {held_out}"), held_out));
     let mut errors = Vec::new();
-    let rendering = rendering_of(
+    let rendering = PixelRendering::new(
         args.transport.regularised(args.min_indirect_roughness),
         args.spp,
         7,

@@ -34,7 +34,9 @@ use std::ops::ControlFlow;
 use std::time::Instant;
 
 use glint_render::bsdf::PrincipledParams;
-use glint_render::integrator::{Camera, LightTransport, path_pixel_frozen_sampling};
+use glint_render::integrator::{
+    Camera, LightTransport, PixelRendering, path_pixel_frozen_sampling,
+};
 use glint_render::projector::Projector;
 use glint_render::scene::Scene;
 use num_dual::Dual32;
@@ -297,29 +299,6 @@ pub enum Residual {
 /// Seed offset of the independent residual estimate of [`Residual::Decorrelated`].
 pub const DECORRELATED_SEED_OFFSET: u64 = 0x5DEE_CE66;
 
-/// How the fit renders a pixel ([`glint_render::integrator::path_pixel`]). With multi-path,
-/// the same seed every iteration gives common random numbers: the loss is a deterministic
-/// function of the parameters apart from lobe-selection jumps. View k renders with
-/// `seed + k`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PixelRendering {
-    /// Which light paths the render follows.
-    pub transport: LightTransport,
-    /// Samples per pixel (≥ 1; one through the pixel centre, more jittered).
-    pub samples_per_pixel: u32,
-    /// Seed of the random streams (view k uses `seed + k`).
-    pub seed: u64,
-}
-
-impl PixelRendering {
-    /// The direct reflection only, one ray through the pixel centre (the paper's I_single).
-    pub const SINGLE_PATH: Self = Self {
-        transport: LightTransport::SinglePath,
-        samples_per_pixel: 1,
-        seed: 0,
-    };
-}
-
 /// `fixed` with the free parameters replaced by `free`.
 pub fn with_free<T: Copy>(fixed: PrincipledParams<T>, free: [T; FREE]) -> PrincipledParams<T> {
     PrincipledParams {
@@ -419,9 +398,7 @@ impl FitProblem<'_> {
             &view.camera,
             &view.projector,
             (u, v),
-            r.transport,
-            r.samples_per_pixel,
-            seed,
+            &PixelRendering { seed, ..*r },
             material,
             sampling.map(|_| &frozen as &dyn Fn(u32) -> PrincipledParams<f32>),
         );

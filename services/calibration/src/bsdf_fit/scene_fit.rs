@@ -13,7 +13,7 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use glint_render::bsdf::PrincipledParams;
-use glint_render::integrator::LightTransport;
+use glint_render::integrator::{LightTransport, PixelRendering};
 use glint_render::projector::Pattern;
 use glint_render::rig::SliRig;
 use glint_render::scene::Scene;
@@ -21,7 +21,7 @@ use nalgebra::Isometry3;
 
 use super::{
     FREE_NAMES, FitConfig, FitError, FitProblem, FitResult, FitTarget, FitView, Loss,
-    MeasuredTarget, PixelRendering, Residual, StartFit, StartFits, TargetError, measured_target,
+    MeasuredTarget, Residual, StartFit, StartFits, TargetError, measured_target,
 };
 use crate::material_map::params_to_map;
 use crate::response::{ExposureStack, ResponseError, ResponseTable};
@@ -316,20 +316,6 @@ impl Capture {
     }
 }
 
-/// How to render pixels: `spp` samples with multi-path, one with single-path.
-pub fn rendering_of(transport: LightTransport, spp: u32, seed: u64) -> PixelRendering {
-    let samples_per_pixel = if transport == LightTransport::SinglePath {
-        1
-    } else {
-        spp
-    };
-    PixelRendering {
-        transport,
-        samples_per_pixel,
-        seed,
-    }
-}
-
 /// Reads the capture at `dir`.
 pub fn read_capture(reader: &dyn CaptureReader, dir: &Path) -> Result<Capture, SceneFitError> {
     reader
@@ -445,7 +431,7 @@ pub fn fit_scene(
     mut progress: impl FnMut(FitProgress) -> ControlFlow<()>,
 ) -> Result<SceneFit, SceneFitError> {
     let im_ids = capture.fitted_views(&config.views)?;
-    let rendering = rendering_of(
+    let rendering = PixelRendering::new(
         config.transport.regularised(config.min_indirect_roughness),
         config.spp,
         1,

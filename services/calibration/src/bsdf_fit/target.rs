@@ -8,7 +8,8 @@ use glint_render::projector::Projector;
 use glint_render::scene::Scene;
 use rayon::prelude::*;
 
-use super::{FitTarget, PixelRendering};
+use super::FitTarget;
+use glint_render::integrator::PixelRendering;
 
 /// A target built from a radiance map.
 #[derive(Clone, Debug)]
@@ -75,23 +76,13 @@ pub fn measured_target(
         })
         .collect();
     let render_reference = |u: u32, v: u32| {
-        path_pixel(
-            scene,
-            camera,
-            projector,
-            u,
-            v,
-            rendering.transport,
-            rendering.samples_per_pixel,
-            rendering.seed,
-            |i| {
-                if i == reference_instance {
-                    *reference_material
-                } else {
-                    *scene.material_of(i)
-                }
-            },
-        )
+        path_pixel(scene, camera, projector, (u, v), rendering, |i| {
+            if i == reference_instance {
+                *reference_material
+            } else {
+                *scene.material_of(i)
+            }
+        })
         .map_or(0.0, |s| s.radiance)
     };
     let interior = |u: u32, v: u32, which: &dyn Fn(u32) -> bool| {

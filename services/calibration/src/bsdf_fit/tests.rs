@@ -323,11 +323,12 @@ fn multi_path_target(
             scene,
             camera,
             projector,
-            u,
-            v,
-            LightTransport::MULTI_PATH_DEFAULT,
-            spp,
-            99,
+            (u, v),
+            &PixelRendering {
+                transport: LightTransport::MULTI_PATH_DEFAULT,
+                samples_per_pixel: spp,
+                seed: 99,
+            },
             material,
         )
         .filter(|s| s.instance == 0)

@@ -1,0 +1,168 @@
+//! Whole-image renders: radiance, depth and labels of every pixel, rows in parallel.
+
+use glam::Vec3A;
+use glint_geometry::image::{Image, PixelRect};
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+
+use super::camera::{camera_image, camera_ray};
+use super::path::trace;
+use super::{Camera, RenderSettings};
+use crate::projector::Projector;
+use crate::scene::Scene;
+
+/// What a render produces, all full-size images (pixels outside the ROI untouched).
+#[derive(Clone, Debug)]
+pub struct RenderOutput {
+    /// Mean radiance per pixel, W·sr⁻¹·m⁻².
+    pub radiance: Image<f32>,
+    /// Depth z of the first surface through the pixel centre, metres; NaN where nothing is hit.
+    pub depth_m: Image<f32>,
+    /// Label of the instance hit through the pixel centre; 0 where nothing is hit.
+    pub label: Image<u16>,
+    /// Rays traced (camera, shadow and bounce rays), for throughput figures.
+    pub rays_traced: u64,
+}
+
+/// Renders what `camera` sees of `scene` under `projector`.
+///
+/// # Panics
+/// When the camera's intrinsics have a zero side (see [`glint_geometry::camera::PinholeIntrinsics::new`]).
+pub fn render(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    settings: &RenderSettings,
+) -> RenderOutput {
+    let mut sinks = vec![(); camera.intrinsics.height_px as usize];
+    render_with_sinks(scene, camera, projector, settings, &mut sinks)
+}
+
+/// Receives every next-event contribution of a render, one sink per image row: what
+/// [`crate::pattern_record`] records to evaluate other projector patterns without tracing again.
+pub(crate) trait DirectSink: Send {
+    /// Column `u` of the sink's row received `radiance` (the path throughput × the projector's
+    /// direct light, W·sr⁻¹·m⁻², not yet divided by the samples per pixel) from the surface
+    /// point `point_w` (world). Called in the order the samples are traced.
+    fn direct(&mut self, u: u32, point_w: Vec3A, radiance: f32);
+}
+
+impl DirectSink for () {
+    #[inline]
+    fn direct(&mut self, _: u32, _: Vec3A, _: f32) {}
+}
+
+/// [`render`], handing every next-event contribution of row v to `sinks[v]` (`sinks` has one
+/// entry per image row; rows without one are not rendered).
+pub(crate) fn render_with_sinks<S: DirectSink>(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    settings: &RenderSettings,
+    sinks: &mut [S],
+) -> RenderOutput {
+    let k = &camera.intrinsics;
+    let (w, h) = (k.width_px, k.height_px);
+    let roi = settings
+        .roi
+        .and_then(|r| r.clipped_to(w, h))
+        .unwrap_or(PixelRect::full(w, h));
+    let mut radiance = camera_image(k, 0f32);
+    let mut depth = Image::filled_like(&radiance, f32::NAN);
+    let mut label = Image::filled_like(&radiance, 0u16);
+    let (rotation, origin) = camera.rotation_and_origin();
+    let spp = settings.samples_per_pixel.max(1);
+    let rows = radiance
+        .data_mut()
+        .par_chunks_mut(w as usize)
+        .zip(depth.data_mut().par_chunks_mut(w as usize))
+        .zip(label.data_mut().par_chunks_mut(w as usize))
+        .zip(sinks.par_iter_mut());
+    let rays_traced: u64 = rows
+        .enumerate()
+        .filter(|(v, _)| (roi.v_min..roi.v_min + roi.height).contains(&(*v as u32)))
+        .map(|(v, (((radiance_row, depth_row), label_row), sink))| {
+            let mut rng = rand_pcg::Pcg32::seed_from_u64(
+                settings.seed ^ (v as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+            );
+            let mut rays = 0u64;
+            for u in roi.u_min..roi.u_min + roi.width {
+                let mut sum = 0.0f32;
+                for s in 0..spp {
+                    let (ju, jv) = if s == 0 {
+                        (0.5, 0.5)
+                    } else {
+                        (rng.random::<f32>(), rng.random::<f32>())
+                    };
+                    let (d_c, direction) = camera_ray(k, &rotation, u as f32 + ju, v as f32 + jv);
+                    let path = trace(
+                        scene,
+                        projector,
+                        origin,
+                        direction,
+                        settings.transport,
+                        &mut rng,
+                        &|i| *scene.material_of(i),
+                        None,
+                        &mut |point, radiance| sink.direct(u, point, radiance),
+                    );
+                    rays += path.rays;
+                    sum += path.radiance;
+                    if s == 0
+                        && let Some((t, instance)) = path.first_hit
+                    {
+                        depth_row[u as usize] = t * d_c.z; // ray length → z
+                        label_row[u as usize] = scene.instances()[instance as usize].label;
+                    }
+                }
+                radiance_row[u as usize] = sum / spp as f32;
+            }
+            rays
+        })
+        .sum();
+    RenderOutput {
+        radiance,
+        depth_m: depth,
+        label,
+        rays_traced,
+    }
+}
+
+/// The label of the first surface through each pixel centre (0 where nothing is hit): primary
+/// rays only, no shading. With `only_instance`, every other instance is transparent, which
+/// gives that instance's whole (amodal) silhouette. Pixels outside `roi` stay 0.
+///
+/// # Panics
+/// When the camera's intrinsics have a zero side (see [`glint_geometry::camera::PinholeIntrinsics::new`]).
+pub fn render_labels(
+    scene: &Scene,
+    camera: &Camera,
+    roi: Option<PixelRect>,
+    only_instance: Option<u32>,
+) -> Image<u16> {
+    let k = &camera.intrinsics;
+    let (w, h) = (k.width_px, k.height_px);
+    let mut label = camera_image(k, 0u16);
+    let Some(roi) = roi.map_or(Some(PixelRect::full(w, h)), |r| r.clipped_to(w, h)) else {
+        return label;
+    };
+    let (rotation, origin) = camera.rotation_and_origin();
+    label
+        .data_mut()
+        .par_chunks_mut(w as usize)
+        .enumerate()
+        .filter(|(v, _)| (roi.v_min..roi.v_min + roi.height).contains(&(*v as u32)))
+        .for_each(|(v, row)| {
+            for u in roi.u_min..roi.u_min + roi.width {
+                let (_, direction) = camera_ray(k, &rotation, u as f32 + 0.5, v as f32 + 0.5);
+                let hit = match only_instance {
+                    None => scene.intersect(origin, direction, f32::INFINITY),
+                    Some(i) => scene.intersect_instance(origin, direction, f32::INFINITY, i),
+                };
+                if let Some(hit) = hit {
+                    row[u as usize] = scene.instances()[hit.instance as usize].label;
+                }
+            }
+        });
+    label
+}
