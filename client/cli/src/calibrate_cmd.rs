@@ -15,19 +15,18 @@ use glint_calibration::bsdf_fit::scene_fit::{
 use glint_calibration::bsdf_fit::{
     FitProblem, Loss, Residual, error_map_png, fit_history_png, free_of,
 };
-use glint_calibration::material_file::{GroundTruthMaterials, MaterialFile, MaterialFileError};
+use glint_calibration::material_file::MaterialFile;
 use glint_calibration::response::{
     DebevecConfig, ExposureStack, ResponseTable, calibrate, response_png,
 };
+use glint_eval::bsdf_check::{
+    PartRadiance, median_abs_log_ratio, part_radiance, read_truth, relative_rms,
+};
 use glint_geometry::io::write_file_atomically;
-use glint_render::bsdf::PrincipledParams;
-use glint_render::integrator::PixelRendering;
-use glint_render::integrator::{LightTransport, path_pixel};
-use glint_render::projector::Pattern;
+use glint_render::integrator::{LightTransport, PixelRendering};
 use glint_render::sensor::ResponseCurve;
 
 use glint_camera::dataset::calibration_scene;
-use rayon::prelude::*;
 
 #[derive(clap::Subcommand)]
 pub enum CalibrateCommand {
@@ -449,90 +448,6 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// What [`part_radiance`] returns: image size, the part's pixels, their radiance per material.
-type PartRadiance = (u32, u32, Vec<(u32, u32)>, [Vec<f32>; 2]);
-
-/// The part's interior pixels (3 × 3 all part instances) seen from `t_w_c`, and their radiance
-/// with each of `materials` on every part instance (rendered alike with `rendering`).
-fn part_radiance(
-    loaded: &Capture,
-    t_w_c: &nalgebra::Isometry3<f64>,
-    materials: [&PrincipledParams<f32>; 2],
-    rendering: &PixelRendering,
-) -> PartRadiance {
-    let [camera, _] = loaded.rig.cameras(t_w_c);
-    let projector = loaded.rig.projector(t_w_c, Pattern::White);
-    let (w, h) = (camera.intrinsics.width_px, camera.intrinsics.height_px);
-    let is_part_instance = |i: u32| loaded.part_instances.contains(&i);
-    let shade = |u, v, m: &PrincipledParams<f32>, r: &PixelRendering| {
-        path_pixel(&loaded.scene, &camera, &projector, (u, v), r, |i| {
-            if is_part_instance(i) {
-                *m
-            } else {
-                *loaded.scene.material_of(i)
-            }
-        })
-    };
-    let first_hits: Vec<bool> = (0..w * h)
-        .into_par_iter()
-        .map(|i| {
-            shade(i % w, i / w, materials[0], &PixelRendering::SINGLE_PATH)
-                .is_some_and(|s| is_part_instance(s.instance))
-        })
-        .collect();
-    let is_part = |u: u32, v: u32| first_hits[(v * w + u) as usize];
-    let mut pixels = Vec::new();
-    for v in 1..h - 1 {
-        for u in 1..w - 1 {
-            if (v - 1..=v + 1).all(|y| (u - 1..=u + 1).all(|x| is_part(x, y))) {
-                pixels.push((u, v));
-            }
-        }
-    }
-    let render = |m| {
-        pixels
-            .par_iter()
-            .map(|&(u, v)| shade(u, v, m, rendering).map_or(0.0, |s| s.radiance))
-            .collect()
-    };
-    (
-        w,
-        h,
-        pixels.clone(),
-        [render(materials[0]), render(materials[1])],
-    )
-}
-
-/// sqrt(Σ (a − b)² / Σ b²).
-fn relative_rms(a: &[f32], b: &[f32]) -> f64 {
-    let (se, norm) = a.iter().zip(b).fold((0.0, 0.0), |(se, n), (&x, &y)| {
-        (se + ((x - y) as f64).powi(2), n + (y as f64).powi(2))
-    });
-    (se / norm.max(f64::MIN_POSITIVE)).sqrt()
-}
-
-/// The median of |ln(a / b)| over the pixels where both are positive (NaN if none): the
-/// typical pixel's relative error, which a few glints cannot dominate.
-fn median_abs_log_ratio(a: &[f32], b: &[f32]) -> f64 {
-    crate::median(
-        a.iter()
-            .zip(b)
-            .filter(|&(&x, &y)| x > 0.0 && y > 0.0)
-            .map(|(&x, &y)| (x as f64 / y as f64).ln().abs())
-            .collect(),
-    )
-}
-
-/// The true material for `eval-bsdf` and the part's name when known: a capture's
-/// `gt_materials.json` (its part), or a material file.
-fn read_truth(path: &Path) -> anyhow::Result<(PrincipledParams<f32>, Option<String>)> {
-    match GroundTruthMaterials::load(path) {
-        Ok(gt) => Ok((gt.part_params()?, Some(gt.part))),
-        Err(MaterialFileError::Malformed { .. }) => Ok((MaterialFile::load(path)?.params()?, None)),
-        Err(e) => Err(e.into()),
-    }
-}
-
 fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
     let loaded = read_capture(&CameraCaptures, &args.scene)?;
     let material = MaterialFile::load(&args.material)?;
@@ -582,8 +497,12 @@ fn eval_bsdf(args: &EvalBsdfArgs) -> anyhow::Result<()> {
     );
     for (name, im_id) in &evaluated {
         let view = loaded.view(*im_id)?;
-        let (w, h, pixels, [fit, gt]) =
-            part_radiance(&loaded, &view.t_w_c, [&fitted, &truth], &rendering);
+        let PartRadiance {
+            width: w,
+            height: h,
+            pixels,
+            radiance: [fit, gt],
+        } = part_radiance(&loaded, &view.t_w_c, [&fitted, &truth], &rendering);
         if pixels.is_empty() {
             anyhow::bail!("{name}: no part pixels to compare");
         }

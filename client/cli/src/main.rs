@@ -92,14 +92,3 @@ fn main() -> std::process::ExitCode {
         }
     }
 }
-
-/// The median of `v` (the mean of the middle two for an even count); NaN if `v` is empty.
-pub(crate) fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    match n {
-        0 => f64::NAN,
-        _ if n % 2 == 1 => v[n / 2],
-        _ => 0.5 * (v[n / 2 - 1] + v[n / 2]),
-    }
-}

@@ -8,6 +8,7 @@
 //! - [`metrics`]: symmetry-aware NEES, correlations, McNemar's test;
 //! - [`table1`]: Table I, SDF refinement against ICP;
 //! - [`depth_uncertainty`]: Fig. 3, predicted σ_z (eq 1–5) against the measured spread;
+//! - [`bsdf_check`]: a fitted material against the truth, on fitted and held-out views;
 //! - [`active`]: an active session on a mock bin (the demo's and the tests');
 //! - [`capture_folder`]: mock captures written as BOP folders, and calibration captures;
 //! - [`policies`]: Fig. 9, the view policies compared;
@@ -20,6 +21,7 @@
 #![warn(missing_docs)]
 
 pub mod active;
+pub mod bsdf_check;
 pub mod capture_folder;
 pub mod depth_uncertainty;
 pub mod initial_pose;

@@ -68,6 +68,17 @@ pub fn chi2_mean_band(k: usize, n: usize) -> (f64, f64) {
     (k - half, k + half)
 }
 
+/// The median of `v` (the mean of the middle two for an even count); NaN if `v` is empty.
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    match n {
+        0 => f64::NAN,
+        _ if n % 2 == 1 => v[n / 2],
+        _ => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
+}
+
 /// Pearson correlation of two equally long samples (NaN when either has no spread).
 pub fn pearson(x: &[f64], y: &[f64]) -> f64 {
     let n = x.len().min(y.len()) as f64;

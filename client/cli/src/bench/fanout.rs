@@ -15,6 +15,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
+use glint_eval::metrics::median;
 use glint_geometry::Part;
 use glint_geometry::io::write_file_atomically;
 use glint_orchestrator::local::LocalPrediction;
@@ -72,15 +73,6 @@ pub fn run(args: &FanoutBenchArgs) -> anyhow::Result<()> {
     match &args.orchestrator {
         Some(orchestrator) => deployment(args, orchestrator),
         None => loopback(args),
-    }
-}
-
-fn median(mut xs: Vec<f64>) -> f64 {
-    xs.sort_by(f64::total_cmp);
-    match xs.len() {
-        0 => f64::NAN,
-        n if n % 2 == 1 => xs[n / 2],
-        n => 0.5 * (xs[n / 2 - 1] + xs[n / 2]),
     }
 }
 

@@ -10,7 +10,7 @@
 //! truth moved by a seeded translation and rotation of fixed magnitude in random directions.
 //! The refiners never see the truth; it only scores their results.
 
-use crate::median;
+use glint_eval::metrics::median;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
