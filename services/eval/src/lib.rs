@@ -10,6 +10,8 @@
 //! - [`depth_uncertainty`]: Fig. 3, predicted σ_z (eq 1–5) against the measured spread;
 //! - [`bsdf_check`]: a fitted material against the truth, on fitted and held-out views;
 //! - [`active`]: an active session on a mock bin (the demo's and the tests');
+//! - [`camera_validation`]: the mock camera against known geometry (depth error by shot
+//!   count and window, wrong depth by cause, the plane at 0.6 m);
 //! - [`capture_folder`]: mock captures written as BOP folders, and calibration captures;
 //! - [`policies`]: Fig. 9, the view policies compared;
 //! - [`progress`]: progress bars for long runs.
@@ -22,6 +24,7 @@
 
 pub mod active;
 pub mod bsdf_check;
+pub mod camera_validation;
 pub mod capture_folder;
 pub mod depth_uncertainty;
 pub mod initial_pose;

@@ -34,7 +34,7 @@ pub fn run(command: EvalCommand) -> anyhow::Result<()> {
     match command {
         EvalCommand::Refine(args) => refine_exp::run(&args),
         EvalCommand::Uncertainty(args) => uncertainty_exp::run_cmd(&args),
-        EvalCommand::Camera(args) => camera_exp::run(&args),
+        EvalCommand::Camera(args) => camera_exp::run_cmd(&args),
         EvalCommand::Active(args) => active_exp::run_cmd(&args),
         EvalCommand::Prediction(args) => prediction_exp::run_cmd(&args),
         EvalCommand::InitialPoses(args) => initial_pose_exp::run(&args),
