@@ -151,8 +151,11 @@ pub fn paper_initial_rates(part: Part) -> InitialRates {
 /// a distribution is the share correct among the accepted first draws.
 #[derive(Clone, Debug)]
 pub struct RateSample {
-    groups: Vec<(Symmetry, Vec<(UnitQuaternion<f64>, [f64; 6])>)>,
+    groups: Vec<(Symmetry, Vec<Draw>)>,
 }
+
+/// One draw of a [`RateSample`]: the object's orientation and six standard normals.
+type Draw = (UnitQuaternion<f64>, [f64; 6]);
 
 impl RateSample {
     /// `samples` draws per symmetry from `seed`.
