@@ -35,7 +35,7 @@ use tonic::{Request, Response, Status, Streaming};
 
 use crate::multiview::{MultiviewError, RefineSettings, RefineSigma, Refinement, refine_views};
 use crate::nbv::{NbvError, PosePrior, plan_next_view, pose_entropy_nats};
-use crate::refine::{REFINE_SDF_VOXEL_MM, SdfRefineConfig};
+use crate::refine::{SdfRefineConfig, refine_grid_config};
 use crate::view::{BackgroundPlane, ViewMeasurement};
 
 /// The service's name, as health reports it.
@@ -140,10 +140,7 @@ impl Estimation {
             })),
             refine: SdfRefineConfig::default(),
             prior: PosePrior::default(),
-            sdf: SdfConfig {
-                voxel_size_m: REFINE_SDF_VOXEL_MM * 1e-3,
-                ..SdfConfig::default()
-            },
+            sdf: refine_grid_config(),
         }
     }
 

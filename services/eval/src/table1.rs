@@ -13,7 +13,9 @@ use anyhow::Context;
 use glint_camera::materials;
 use glint_estimation::icp::{IcpConfig, IcpMethod, IcpModel, refine_icp};
 use glint_estimation::points::DepthPoint;
-use glint_estimation::refine::{SdfRefineConfig, refine_sdf};
+use glint_estimation::refine::{
+    REFINE_SDF_PADDING_MM, SdfRefineConfig, refine_grid_config, refine_sdf,
+};
 use glint_geometry::io::{read_mesh, write_file_atomically};
 use glint_geometry::pose_deviation::{CorrectThreshold, PoseDeviation, pose_deviation};
 use glint_geometry::sdf::{SdfConfig, SdfGrid};
@@ -56,6 +58,9 @@ pub struct RefineExperiment {
     pub spp: u32,
     /// ICP's max correspondence distances to choose from, mm, on separate tuning scenes.
     pub icp_distances_mm: Vec<f64>,
+    /// The SDF refiner's first gates to choose from, mm, on the same tuning scenes (each at
+    /// most the grid's padding, [`glint_estimation::refine::REFINE_SDF_PADDING_MM`]).
+    pub sdf_gates_mm: Vec<f64>,
     /// Tuning scenes per part for ICP's distance (seeds disjoint from the evaluation's).
     pub tune_scenes: u32,
     /// Control: paint the parts with the matte diffuse twin (scenes cached separately).
@@ -241,7 +246,6 @@ fn trial_points(trial: &Trial, scene: &LoadedScene) -> Vec<DepthPoint> {
 
 struct Refiners {
     sdf: SdfGrid,
-    sdf_config: SdfRefineConfig,
     icp_model: IcpModel,
 }
 
@@ -277,6 +281,7 @@ fn run_trial(
     trial: &Trial,
     scene: &LoadedScene,
     refiners: &Refiners,
+    sdf_config: &SdfRefineConfig,
     icp_configs: &IcpConfigs,
     symmetry: &Symmetry,
     methods: &[RefineMethod],
@@ -305,7 +310,7 @@ fn run_trial(
             RefineMethod::Initial => outcome(method, t_o_w_init, 0, 0.0, "initial".into(), None),
             RefineMethod::Sdf => {
                 let start = Instant::now();
-                let result = refine_sdf(&refiners.sdf, &points, &t_o_w_init, &refiners.sdf_config);
+                let result = refine_sdf(&refiners.sdf, &points, &t_o_w_init, sdf_config);
                 let ms = start.elapsed().as_secs_f64() * 1e3;
                 match result {
                     Ok(r) => {
@@ -380,6 +385,16 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
     {
         anyhow::bail!("--icp-distances-mm: give positive distances, e.g. 2,5,10,20");
     }
+    if args.sdf_gates_mm.is_empty()
+        || args
+            .sdf_gates_mm
+            .iter()
+            .any(|g| !(g.is_finite() && *g > 0.0 && *g <= REFINE_SDF_PADDING_MM))
+    {
+        anyhow::bail!(
+            "--sdf-gates-mm: give gates above 0 and at most the SDF grid's padding, {REFINE_SDF_PADDING_MM} mm, e.g. 10,20,30"
+        );
+    }
     let objects = objects(args)?;
     let rig =
         glint_render::rig::SliRig::ensenso_n35().resized(args.resolution.0, args.resolution.1)?;
@@ -407,7 +422,6 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
     let scene_root = args
         .out
         .join(if args.matte { "scenes_matte" } else { "scenes" });
-    let sdf_config = SdfRefineConfig::default();
     // Evaluation seeds: seed·10⁴ + s; tuning seeds: seed·10⁴ + 5000 + s (disjoint for < 5000 scenes).
     let eval_seed = |s: u32| args.seed.wrapping_mul(10_000).wrapping_add(s as u64);
     let tune_seed = |s: u32| eval_seed(5000 + s);
@@ -416,21 +430,18 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
     for object in &objects {
         let grid_config = SdfConfig {
             voxel_size_m: args.sdf_voxel_mm * 1e-3,
-            ..SdfConfig::default()
+            ..refine_grid_config()
         };
         let sdf = SdfGrid::build(&object.mesh, &grid_config)
             .with_context(|| format!("SDF of {}", object.name))?;
         let icp_model = IcpModel::from_mesh(&object.mesh, 50_000, args.seed)
             .with_context(|| format!("ICP model of {}", object.name))?;
-        refiners.push(Refiners {
-            sdf,
-            sdf_config,
-            icp_model,
-        });
+        refiners.push(Refiners { sdf, icp_model });
     }
 
-    // 1. Each ICP variant's correspondence distance: its best 2 mm/2° rate (all parts, all
-    //    view counts) on the tuning scenes.
+    // 1. Each refiner's one free setting by its best 2 mm/2° rate (all parts, all view counts)
+    //    on the tuning scenes: each ICP variant's correspondence distance, the SDF refiner's
+    //    first gate.
     let mut tune_trials = Vec::new();
     for (index, object) in objects.iter().enumerate() {
         for s in 0..args.tune_scenes {
@@ -439,10 +450,15 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
             tune_trials.push((index, seed, dir));
         }
     }
-    let bar = crate::progress::bar(tune_trials.len() as u64, "tune icp");
+    let bar = crate::progress::bar(tune_trials.len() as u64, "tune refiners");
     let icp_variants = [RefineMethod::Icp, RefineMethod::IcpPlane];
     // Per distance: (hits 2/2, n) of each variant.
     let mut per_distance = vec![[(0usize, 0usize); 2]; args.icp_distances_mm.len()];
+    let mut per_gate = vec![(0usize, 0usize); args.sdf_gates_mm.len()];
+    let sdf_at = |gate_mm: f64| SdfRefineConfig {
+        gate_m: gate_mm * 1e-3,
+        ..SdfRefineConfig::default()
+    };
     for &(index, seed, ref dir) in &tune_trials {
         let object = &objects[index];
         let scene = load_scene(dir, OBJ_ID, window_radius_px, erode_px)?;
@@ -454,6 +470,7 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
                     t,
                     &scene,
                     &refiners[index],
+                    &SdfRefineConfig::default(),
                     &configs,
                     &object.symmetry,
                     &icp_variants,
@@ -464,36 +481,47 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
                 }
             }
         }
+        for (g, counts) in args.sdf_gates_mm.iter().zip(per_gate.iter_mut()) {
+            for t in &trials {
+                let outcomes = run_trial(
+                    t,
+                    &scene,
+                    &refiners[index],
+                    &sdf_at(*g),
+                    &IcpConfigs::at(args.icp_distances_mm[0] * 1e-3),
+                    &object.symmetry,
+                    &[RefineMethod::Sdf],
+                );
+                counts.1 += 1;
+                counts.0 += outcomes[0]
+                    .deviation
+                    .is_correct(&CorrectThreshold::MM2_DEG2) as usize;
+            }
+        }
         bar.inc(1);
     }
     bar.finish_and_clear();
     let mut tunings = Vec::new();
     for v in 0..icp_variants.len() {
-        let tuning: Vec<(f64, usize, usize)> = args
-            .icp_distances_mm
-            .iter()
-            .zip(&per_distance)
-            .map(|(d, acc)| (*d, acc[v].0, acc[v].1))
-            .collect();
-        // Ties go to the later (larger) distance: `max_by` keeps the last maximum.
-        let best = tuning
-            .iter()
-            .max_by(|a, b| {
-                (a.1 as f64 / a.2.max(1) as f64).total_cmp(&(b.1 as f64 / b.2.max(1) as f64))
-            })
-            .context("--icp-distances-mm: give at least one distance")?
-            .0;
+        let counts: Vec<(usize, usize)> = per_distance.iter().map(|acc| acc[v]).collect();
+        let tuning = SettingTuning::choose(&args.icp_distances_mm, &counts)
+            .context("--icp-distances-mm: give at least one distance")?;
         tracing::info!(
-            "{} max correspondence distance: {best} mm (tuning 2/2 rates: {})",
+            "{} max correspondence distance: {} mm (tuning 2/2 rates: {})",
             icp_variants[v].label(),
-            tuning
-                .iter()
-                .map(|(d, h, n)| format!("{d} mm {:.3}", *h as f64 / (*n).max(1) as f64))
-                .collect::<Vec<_>>()
-                .join(", ")
+            tuning.best,
+            tuning.describe()
         );
-        tunings.push(IcpTuning { tuning, best });
+        tunings.push(tuning);
     }
+    let sdf_tuning = SettingTuning::choose(&args.sdf_gates_mm, &per_gate)
+        .context("--sdf-gates-mm: give at least one gate")?;
+    tracing::info!(
+        "SDF first gate: {} mm (tuning 2/2 rates: {})",
+        sdf_tuning.best,
+        sdf_tuning.describe()
+    );
+    let sdf_config = sdf_at(sdf_tuning.best);
     let icp_configs = IcpConfigs {
         point_to_point: IcpConfigs::at(tunings[0].best * 1e-3).point_to_point,
         point_to_plane: IcpConfigs::at(tunings[1].best * 1e-3).point_to_plane,
@@ -512,6 +540,7 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
                     &trial,
                     &scene,
                     refiner,
+                    &sdf_config,
                     &icp_configs,
                     &object.symmetry,
                     &RefineMethod::ALL,
@@ -523,14 +552,50 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
         bar.finish_and_clear();
     }
 
-    write_outputs(args, &objects, &all, &noise, &tunings)
+    write_outputs(
+        args,
+        &objects,
+        &all,
+        &noise,
+        &tunings,
+        &sdf_tuning,
+        &sdf_config,
+    )
 }
 
-/// One ICP variant's tuning: (distance mm, hits at 2/2, trials) per distance, and the chosen
-/// distance, mm.
-struct IcpTuning {
+/// One refiner's setting chosen on the tuning scenes: (value, hits at 2/2, trials) per
+/// candidate value, and the value chosen (mm).
+struct SettingTuning {
     tuning: Vec<(f64, usize, usize)>,
     best: f64,
+}
+
+impl SettingTuning {
+    /// The value of best 2/2 rate among `values` with `(hits, trials)` each; ties go to the
+    /// later (larger) value (`max_by` keeps the last maximum). `None` without values.
+    fn choose(values: &[f64], counts: &[(usize, usize)]) -> Option<Self> {
+        let tuning: Vec<(f64, usize, usize)> = values
+            .iter()
+            .zip(counts)
+            .map(|(v, (hits, n))| (*v, *hits, *n))
+            .collect();
+        let best = tuning
+            .iter()
+            .max_by(|a, b| {
+                (a.1 as f64 / a.2.max(1) as f64).total_cmp(&(b.1 as f64 / b.2.max(1) as f64))
+            })?
+            .0;
+        Some(Self { tuning, best })
+    }
+
+    /// `10 mm → 12.3 %, …` for the report.
+    fn describe(&self) -> String {
+        self.tuning
+            .iter()
+            .map(|(d, h, n)| format!("{d} mm → {:.1} %", 100.0 * *h as f64 / (*n).max(1) as f64))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
 }
 
 fn write_outputs(
@@ -538,7 +603,9 @@ fn write_outputs(
     objects: &[EvalObject],
     all: &[(Trial, Vec<Outcome>)],
     noise: &InitialPoseNoise,
-    tunings: &[IcpTuning],
+    tunings: &[SettingTuning],
+    sdf_tuning: &SettingTuning,
+    sdf_config: &SdfRefineConfig,
 ) -> anyhow::Result<String> {
     let mut groups: Vec<String> = objects.iter().map(|o| o.name.clone()).collect();
     groups.push("all".into());
@@ -670,25 +737,21 @@ fn write_outputs(
             .collect();
         writeln!(table, "- {g}: {}", counts.join(", "))?;
     }
-    let tuning_text = |t: &IcpTuning| {
-        t.tuning
-            .iter()
-            .map(|(d, h, n)| format!("{d} mm → {:.1} %", 100.0 * *h as f64 / (*n).max(1) as f64))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
     writeln!(
         table,
         "\nInitial poses: {}.\n\nICP: k-d tree over 50 000 area-uniform model samples, 30 iterations (the SDF \
          refiner's budget); each variant's max correspondence distance is its best 2 mm/2° rate on {} separate tuning \
-         scene(s) per part: point-to-point {} mm ({}), point-to-plane {} mm ({}).\n\nSDF refiner: {:?}.\n",
+         scene(s) per part: point-to-point {} mm ({}), point-to-plane {} mm ({}).\n\nSDF refiner: its first gate chosen \
+         the same way, {} mm ({}); {:?}.\n",
         noise.describe(),
         args.tune_scenes,
         tunings[0].best,
-        tuning_text(&tunings[0]),
+        tunings[0].describe(),
         tunings[1].best,
-        tuning_text(&tunings[1]),
-        SdfRefineConfig::default()
+        tunings[1].describe(),
+        sdf_tuning.best,
+        sdf_tuning.describe(),
+        sdf_config
     )?;
 
     // Paired comparison: the same trials, so McNemar's exact test on the discordant pairs.

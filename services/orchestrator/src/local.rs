@@ -79,8 +79,8 @@ impl CameraStage for MockCamera {
 
 /// SDF grids built once per mesh, keyed by the mesh's content hash, with the refiner's voxel.
 pub struct SdfCache {
-    /// How grids are built: by default the refiner's voxel
-    /// ([`glint_estimation::refine::REFINE_SDF_VOXEL_MM`]).
+    /// How grids are built: by default the refiner's
+    /// ([`glint_estimation::refine::refine_grid_config`]).
     pub config: SdfConfig,
     grids: Mutex<HashMap<String, Arc<SdfGrid>>>,
 }
@@ -88,10 +88,7 @@ pub struct SdfCache {
 impl Default for SdfCache {
     fn default() -> Self {
         Self {
-            config: SdfConfig {
-                voxel_size_m: glint_estimation::refine::REFINE_SDF_VOXEL_MM * 1e-3,
-                ..SdfConfig::default()
-            },
+            config: glint_estimation::refine::refine_grid_config(),
             grids: Mutex::new(HashMap::new()),
         }
     }

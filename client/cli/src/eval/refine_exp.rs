@@ -44,7 +44,12 @@ pub struct RefineArgs {
     /// ICP's max correspondence distances to choose from (mm), on separate tuning scenes.
     #[arg(long, default_value = "2,5,10,20", value_delimiter = ',')]
     pub icp_distances_mm: Vec<f64>,
-    /// Tuning scenes per part for ICP's distance (seeds disjoint from the evaluation's).
+    /// The SDF refiner's first gates to choose from, mm, by the best 2 mm/2° rate on the same
+    /// tuning scenes (each at most the SDF grid's 30 mm padding).
+    #[arg(long, default_value = "10,20,30", value_delimiter = ',')]
+    pub sdf_gates_mm: Vec<f64>,
+    /// Tuning scenes per part for ICP's distance and the SDF refiner's gate (seeds disjoint
+    /// from the evaluation's).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub tune_scenes: u32,
     /// Control experiment: paint the parts with the matte diffuse twin instead of their
@@ -97,6 +102,7 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
         resolution: args.resolution,
         spp: args.spp,
         icp_distances_mm: args.icp_distances_mm.clone(),
+        sdf_gates_mm: args.sdf_gates_mm.clone(),
         tune_scenes: args.tune_scenes,
         matte: args.matte,
         shots: args.shots,
