@@ -114,10 +114,9 @@ impl Uncertainty {
                 objects: HashMap::new(),
             })),
             defaults: PredictionSettings::default(),
-            sdf: SdfConfig {
-                voxel_size_m: glint_estimation::refine::REFINE_SDF_VOXEL_MM * 1e-3,
-                ..SdfConfig::default()
-            },
+            // The refiner's grid, so that a worker's Fisher information equals the in-process
+            // stages' bit for bit (they share one grid per mesh).
+            sdf: glint_estimation::refine::refine_grid_config(),
         }
     }
 
