@@ -13,7 +13,7 @@ use glint_calibration::response::ResponseTable;
 use glint_calibration::server::response_to_message;
 use glint_estimation::depth_sigma::NoiseModel;
 use glint_geometry::io::{PlyEncoding, read_mesh_from_bytes, write_ply_to_vec};
-use glint_geometry::sdf::{SdfConfig, SdfGrid};
+use glint_geometry::sdf::SdfGrid;
 use glint_geometry::{LengthUnit, Part};
 use glint_proto::v1;
 use glint_proto::v1::uncertainty_service_client::UncertaintyServiceClient;
@@ -84,14 +84,8 @@ fn fixture() -> Fixture {
     )
     .unwrap()
     .mesh;
-    let sdf = SdfGrid::build(
-        &mesh,
-        &SdfConfig {
-            voxel_size_m: glint_estimation::refine::REFINE_SDF_VOXEL_MM * 1e-3,
-            ..SdfConfig::default()
-        },
-    )
-    .unwrap();
+    // The server's grid: the refiner's.
+    let sdf = SdfGrid::build(&mesh, &glint_estimation::refine::refine_grid_config()).unwrap();
     let object = PredictorObject {
         mesh: Arc::new(mesh),
         sdf: Arc::new(sdf),
