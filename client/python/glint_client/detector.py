@@ -5,8 +5,10 @@ It mirrors Glint's `glint_eval::active::stand_in_detector` and `InitialPoseNoise
 magnitudes, not bit for bit (Python's Mersenne Twister instead of Rust's PCG64): the most
 visible instance from the detector's view (largest visib_fract × px_count_all) and its true
 pose perturbed in that view's camera frame like a template detector's error — translation
-N(0, diag(3 mm, 3 mm, 5 mm)²) (x, y lateral, z depth), rotation exp(ω) about the object origin
-with ω ~ N(0, (5°)² I), redrawn unless within 30 mm / 30° of the truth (symmetry-aware).
+N(0, diag(0.528 mm, 0.528 mm, 16.9 mm)²) (x, y lateral, z depth), rotation exp(ω) about the
+object origin with ω ~ N(0, (2.229°)² I), redrawn unless within 30 mm / 30° of the truth
+(symmetry-aware). The values are Glint's fit to the paper's initial row of Table I (21.3 % at
+5 mm/5°, 1.77 % at 2 mm/2°; `glint eval initial-poses`).
 """
 
 from __future__ import annotations
@@ -31,9 +33,9 @@ class InitialPoseNoise:
     """A template detector's error in its camera's frame: lateral (x, y) and depth (z)
     translation sigmas in metres, and the rotation sigma per axis in radians."""
 
-    lateral_sigma_m: float = 3e-3
-    depth_sigma_m: float = 5e-3
-    rotation_sigma_rad: float = math.radians(5.0)
+    lateral_sigma_m: float = 0.528e-3
+    depth_sigma_m: float = 32 * 0.528e-3
+    rotation_sigma_rad: float = math.radians(2.229)
 
     def draw(self, t_c_o_gt: Pose, symmetry: Symmetry, rng: random.Random) -> Pose:
         """An initial `t_c_o` around the true `t_c_o_gt`, within 30 mm / 30° of it."""
@@ -53,9 +55,9 @@ class InitialPoseNoise:
 
     def describe(self) -> str:
         return (
-            f"translation N(0, diag({self.lateral_sigma_m * 1e3:.1f}, {self.lateral_sigma_m * 1e3:.1f}, "
-            f"{self.depth_sigma_m * 1e3:.1f} mm)) in the detector's camera frame, rotation exp(ω) with "
-            f"ω ~ N(0, ({math.degrees(self.rotation_sigma_rad):.1f}°)² I), redrawn unless within 30 mm/30°"
+            f"translation N(0, diag({self.lateral_sigma_m * 1e3:.2f}, {self.lateral_sigma_m * 1e3:.2f}, "
+            f"{self.depth_sigma_m * 1e3:.2f} mm)) in the detector's camera frame, rotation exp(ω) with "
+            f"ω ~ N(0, ({math.degrees(self.rotation_sigma_rad):.2f}°)² I), redrawn unless within 30 mm/30°"
         )
 
 
