@@ -132,6 +132,7 @@ fn eval_refine_rejects_bad_arguments_before_writing() {
         ("--icp-distances-mm", "0,-1", "--icp-distances-mm"),
         ("--parts", "gear,spanner", "spanner"),
         ("--window-radius-px", "0", "--window-radius-px"),
+        ("--sdf-gates-mm", "10,40", "--sdf-gates-mm"),
     ] {
         let mut args = vec!["eval", "refine", "--views-per-scene", "4", "--out"];
         args.push(out.to_str().unwrap());
@@ -141,6 +142,20 @@ fn eval_refine_rejects_bad_arguments_before_writing() {
         assert_eq!(o.status.code(), Some(1), "{err}");
         assert!(err.contains(needle) && !err.contains("panicked"), "{err}");
         assert!(!out.exists(), "{flag} {value} left output behind");
+    }
+}
+
+#[test]
+fn eval_initial_poses_rejects_a_ratio_it_cannot_fit_at() {
+    for ratio in ["0", "-2", "nan"] {
+        let flag = format!("--depth-to-lateral={ratio}");
+        let o = glint(&["eval", "initial-poses", "--samples", "100", &flag]);
+        let err = text(&o);
+        assert_ne!(o.status.code(), Some(0), "{ratio}: {err}");
+        assert!(
+            err.contains("--depth-to-lateral") && !err.contains("panicked"),
+            "{err}"
+        );
     }
 }
 
