@@ -2,6 +2,8 @@
 //!
 //! - [`depth_sigma`]: per-pixel depth variance σ_z² from the pattern images (eq 1–5);
 //! - [`points`]: masked depth → camera-frame points → world frame (eq 6–7);
+//! - [`depth_alignment`]: a detector's pose moved along the viewing ray onto the depth before
+//!   refinement (its worst axis);
 //! - [`refine`]: uncertainty-weighted SDF Gauss–Newton / Levenberg–Marquardt over T_o_w
 //!   (eq 8–11) and the pose covariance from the Fisher information (eq 18–19);
 //! - [`icp`]: the ICP baseline (point-to-point and point-to-plane) on the same inputs;
@@ -16,6 +18,7 @@
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
 #![warn(missing_docs)]
 
+pub mod depth_alignment;
 pub mod depth_sigma;
 pub mod icp;
 pub mod multiview;
