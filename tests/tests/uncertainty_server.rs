@@ -84,8 +84,8 @@ fn fixture() -> Fixture {
     )
     .unwrap()
     .mesh;
-    // The server's grid: the refiner's.
-    let sdf = SdfGrid::build(&mesh, &glint_estimation::refine::refine_grid_config()).unwrap();
+    // The server's grid.
+    let sdf = SdfGrid::build(&mesh, &glint_uncertainty::predict::prediction_grid_config()).unwrap();
     let object = PredictorObject {
         mesh: Arc::new(mesh),
         sdf: Arc::new(sdf),

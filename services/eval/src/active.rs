@@ -632,9 +632,11 @@ mod tests {
         let scene = small_scene();
         let calibration = Calibration::embedded(Part::Zigzag).unwrap().unwrap();
         let object = prediction_object(&scene, &calibration, true).unwrap();
-        let sdf = glint_orchestrator::local::SdfCache::default()
-            .grid(&object.object)
-            .unwrap();
+        let sdf = glint_orchestrator::local::SdfCache::with_config(
+            glint_uncertainty::predict::prediction_grid_config(),
+        )
+        .grid(&object.object)
+        .unwrap();
         let settings = glint_uncertainty::PredictionSettings {
             with_maps: true,
             ..Default::default()

@@ -113,7 +113,7 @@ pub fn run(
         mesh_sha256_hex: mesh.content_sha256_hex(),
         mesh: Arc::new(mesh),
     };
-    let sdf = SdfCache::default()
+    let sdf = SdfCache::with_config(glint_uncertainty::predict::prediction_grid_config())
         .grid(&object)
         .map_err(anyhow::Error::msg)?;
     let mut grid: Vec<Confusion> = study

@@ -95,6 +95,14 @@ impl Default for SdfCache {
 }
 
 impl SdfCache {
+    /// An empty cache building grids with `config`.
+    pub fn with_config(config: SdfConfig) -> Self {
+        Self {
+            config,
+            grids: Mutex::new(HashMap::new()),
+        }
+    }
+
     /// The SDF grid of `object`, built on first use.
     pub fn grid(&self, object: &SessionObject) -> Result<Arc<SdfGrid>, StageError> {
         let poisoned = |_| StageError::Internal("the SDF cache's lock was poisoned".into());
@@ -131,13 +139,23 @@ pub struct LocalEstimation {
 
 /// The render workers in-process: candidate predictions in parallel (and each render parallel
 /// inside).
-#[derive(Default)]
 pub struct LocalPrediction {
     /// Thresholds and render settings; the request's σ model, seed and maps override theirs,
     /// the object's camera its shots and window.
     pub settings: PredictionSettings,
     /// The session objects' SDF grids.
     pub grids: SdfCache,
+}
+
+impl Default for LocalPrediction {
+    /// The default settings, grids as the render workers build them
+    /// ([`glint_uncertainty::predict::prediction_grid_config`]).
+    fn default() -> Self {
+        Self {
+            settings: PredictionSettings::default(),
+            grids: SdfCache::with_config(glint_uncertainty::predict::prediction_grid_config()),
+        }
+    }
 }
 
 impl PredictionStage for LocalPrediction {

@@ -114,9 +114,7 @@ impl Uncertainty {
                 objects: HashMap::new(),
             })),
             defaults: PredictionSettings::default(),
-            // The refiner's grid, so that a worker's Fisher information equals the in-process
-            // stages' bit for bit (they share one grid per mesh).
-            sdf: glint_estimation::refine::refine_grid_config(),
+            sdf: crate::predict::prediction_grid_config(),
         }
     }
 

@@ -82,7 +82,7 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
         args.predict_bin,
     )?;
     let predictor = object.predictor(
-        SdfCache::default()
+        SdfCache::with_config(glint_uncertainty::predict::prediction_grid_config())
             .grid(&object.object)
             .map_err(anyhow::Error::msg)?,
     );
