@@ -4,6 +4,7 @@
 //! - [`points`]: masked depth → camera-frame points → world frame (eq 6–7);
 //! - [`depth_alignment`]: a detector's pose moved along the viewing ray onto the depth before
 //!   refinement (its worst axis);
+//! - [`correlated_error`]: depth errors neighbouring pixels share, and the information left;
 //! - [`refine`]: uncertainty-weighted SDF Gauss–Newton / Levenberg–Marquardt over T_o_w
 //!   (eq 8–11) and the pose covariance from the Fisher information (eq 18–19);
 //! - [`icp`]: the ICP baseline (point-to-point and point-to-plane) on the same inputs;
@@ -18,6 +19,7 @@
 #![cfg_attr(not(test), deny(clippy::expect_used, clippy::unwrap_used))]
 #![warn(missing_docs)]
 
+pub mod correlated_error;
 pub mod depth_alignment;
 pub mod depth_sigma;
 pub mod icp;

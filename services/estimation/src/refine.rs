@@ -321,11 +321,22 @@ fn huber(e: f64, k: f64) -> (f64, f64) {
     }
 }
 
+/// `G = ∂r/∂z = ∇ᵀ R_o_w ∂p_w/∂z` (eq 11): how much a point's SDF residual moves per metre
+/// of error in its measured depth.
+#[inline(always)]
+pub(crate) fn depth_gain(
+    gradient: &Vector3<f64>,
+    point: &DepthPoint,
+    rot_o_w: &Matrix3<f64>,
+) -> f64 {
+    gradient.dot(&(rot_o_w * point.dp_dz_w))
+}
+
 /// One point's Jacobian `J = ∇ᵀ [I | −[p_o]×] = (∇, p_o × ∇)` (eq 10) and inverse residual
 /// variance `1/Σ_sdf` with `Σ_sdf = G² σ_z² + σ_model²`, `G = ∇ᵀ R_o_w ∂p_w/∂z` (eq 11), from
 /// the SDF gradient `gradient` at the point's object-frame position `p_o`.
 #[inline(always)]
-fn point_terms(
+pub(crate) fn point_terms(
     gradient: &Vector3<f64>,
     p_o: &Point3<f64>,
     point: &DepthPoint,
@@ -334,7 +345,7 @@ fn point_terms(
 ) -> ([f64; 6], f64) {
     let n = gradient;
     let rot = p_o.coords.cross(n);
-    let gz = n.dot(&(rot_o_w * point.dp_dz_w));
+    let gz = depth_gain(gradient, point, rot_o_w);
     let var = gz * gz * point.sigma_z_m * point.sigma_z_m + model_var;
     ([n.x, n.y, n.z, rot.x, rot.y, rot.z], var.recip())
 }

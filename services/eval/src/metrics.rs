@@ -68,6 +68,11 @@ pub fn chi2_mean_band(k: usize, n: usize) -> (f64, f64) {
     (k - half, k + half)
 }
 
+/// The arithmetic mean of `v`; NaN if `v` is empty.
+pub fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
 /// The median of `v` (the mean of the middle two for an even count); NaN if `v` is empty.
 pub fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
