@@ -17,8 +17,8 @@
 //!
 //! The two numbers describe the camera, not a result: [`fit_correlated_error`] measures them
 //! as the maximum-likelihood fit to depth residuals at known poses (tuning scenes, never an
-//! evaluation's). Points count where the refiner's last stage weighs them: inside the grid
-//! and within its final gate.
+//! evaluation's). Points count where the refiner's last stage weighs them: inside the grid,
+//! within its final gate, on a face turned towards their camera.
 
 use std::collections::HashMap;
 
@@ -26,7 +26,7 @@ use glint_geometry::sdf::SdfGrid;
 use nalgebra::{Isometry3, Matrix6, Point3, Vector6};
 
 use crate::points::DepthPoint;
-use crate::refine::{SdfRefineConfig, depth_gain, point_terms};
+use crate::refine::{SdfRefineConfig, depth_gain, faces_away, point_terms};
 
 /// A depth bias shared by one view's points within a world cell.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,7 +47,7 @@ impl CorrelatedDepthError {
 
     /// Checks the two numbers, naming the bad one.
     pub fn validate(&self) -> Result<(), CorrelatedErrorInvalid> {
-        if !(self.cell_m > 0.0) {
+        if self.cell_m.is_nan() || self.cell_m <= 0.0 {
             return Err(CorrelatedErrorInvalid::CellSize(self.cell_m));
         }
         if !(self.bias_sigma_m.is_finite() && self.bias_sigma_m >= 0.0) {
@@ -101,7 +101,10 @@ fn weighed_points(
         .filter_map(|point| {
             let p_o: Point3<f64> = t_o_w * point.p_w;
             let s = sdf.sample(&p_o);
-            if !s.inside_grid || s.distance_m.abs() > config.final_gate_m {
+            if !s.inside_grid
+                || s.distance_m.abs() > config.final_gate_m
+                || faces_away(&s.gradient, point, &rot_o_w, config.back_facing_cos)
+            {
                 return None;
             }
             let (j, w) = point_terms(&s.gradient, &p_o, point, &rot_o_w, model_var);

@@ -16,6 +16,7 @@ use glint_geometry::sdf::SdfGrid;
 use nalgebra::{Isometry3, Matrix6};
 use rayon::prelude::*;
 
+use crate::depth_alignment::{DepthAlignmentConfig, align_depth};
 use crate::depth_sigma::DepthSigmaError;
 use crate::refine::{RefineError, RefineStatus, SdfRefineConfig, refine_sdf};
 use crate::view::{
@@ -56,6 +57,11 @@ pub struct RefineSettings {
     pub window_radius_px: u32,
     /// Which depth σ the points are weighed with.
     pub sigma: RefineSigma,
+    /// Before refining, move the hypothesis along the points' viewing direction onto the depth
+    /// ([`crate::depth_alignment::align_depth`], ±30 mm): a template detector's worst axis.
+    /// Absent from older journals: off.
+    #[serde(default)]
+    pub align_depth: bool,
 }
 
 /// What a refinement over all views so far gives.
@@ -272,7 +278,20 @@ pub fn refine_views(
         refine_sdf(grid, points, &t_w_o.inverse(), config).map_err(MultiviewError::from)
     };
     let (points, mut view_points) = points_at(t_w_o, settings.mask_margin_m)?;
-    let mut result = refine(&points, t_w_o)?;
+    // The hypothesis' own silhouette holds the part's pixels (a detector errs least across the
+    // image); only then is it moved along the rays onto their depth.
+    let start = if settings.align_depth {
+        align_depth(
+            grid,
+            &points,
+            &t_w_o.inverse(),
+            &DepthAlignmentConfig::default(),
+        )
+        .map_or(*t_w_o, |a| a.t_o_w.inverse())
+    } else {
+        *t_w_o
+    };
+    let mut result = refine(&points, &start)?;
     if let Some(margin_m) = settings.final_mask_margin_m
         && result.status != RefineStatus::Diverged
     {
@@ -326,6 +345,7 @@ mod tests {
             erode_px: 2,
             window_radius_px: 2,
             sigma: RefineSigma::PatternImages,
+            align_depth: false,
         }
     }
 

@@ -76,6 +76,14 @@ pub struct SdfRefineConfig {
     pub model_sigma_m: f64,
     /// Inliers for the covariance: whitened residual within this at the solution. Default 3.
     pub inlier_k: f64,
+    /// A point whose model surface faces away from its camera, `∇SDF · ray > back_facing_cos ·
+    /// |ray|` with `ray` its `dp_dz_w`, is an outlier at that pose: a camera sees no back
+    /// face. Without the test a thin part fits a face's points onto its back face too — the
+    /// Zigzag's 1.5 mm sheet has two zero sets 1.5 mm apart, and half of its one-view sessions
+    /// ended on the wrong one (`glint eval active`, tuning bins 201–220). Default 0.2: about
+    /// 12° past grazing, beyond what a pose a few degrees off tilts a silhouette's normals;
+    /// `f64::INFINITY` turns the test off.
+    pub back_facing_cos: f64,
     /// Converged when the step's translation is below this (m) and its rotation below
     /// `step_tolerance_rad`. Default 1 µm and 1 µrad, as Glint's ICP: far below the depth
     /// noise, and a damped step this small is not worth another pass over the points.
@@ -109,6 +117,7 @@ impl Default for SdfRefineConfig {
             huber_k: 2.0,
             model_sigma_m: 0.3e-3,
             inlier_k: 3.0,
+            back_facing_cos: 0.2,
             step_tolerance_m: 1e-6,
             step_tolerance_rad: 1e-6,
             step_sigma_tolerance: 1.0,
@@ -142,6 +151,11 @@ pub struct RefineResult {
     pub iterations: usize,
     /// Σ ρ(r/σ) at the solution (Huber cost, truncated at the final gate).
     pub final_cost: f64,
+    /// The same cost, over the same points and gate, at the initial pose. Above `final_cost`
+    /// unless the refiner ended somewhere its own objective likes less than its start — which
+    /// the graduated gates allow (a wide gate pulls towards wrong depth that the final gate
+    /// then drops): see [`RefineResult::cost_rose`].
+    pub start_cost: f64,
     /// Points with whitened residual within `inlier_k` at the solution.
     pub inliers: usize,
     /// RMS of the inliers' SDF residuals, metres.
@@ -154,9 +168,19 @@ pub struct RefineResult {
     pub covariance: Option<Matrix6<f64>>,
     /// Residual evaluations (residual, Jacobian and weight of one point at one pose), summed
     /// over every pass: the initial one, one per gate stage, one per Levenberg–Marquardt trial
-    /// step, and the final one over all points when the last stage's normal equations came from
-    /// the coarse subset. The work of a refinement.
+    /// step, the final one over all points when the last stage's normal equations came from
+    /// the coarse subset, and one over all points at the start (`start_cost`). The work of a
+    /// refinement.
     pub point_evaluations: usize,
+}
+
+impl RefineResult {
+    /// The refined pose costs more than the initial one by the refiner's own final objective:
+    /// the refinement made its start worse as far as the data can tell. No ground truth is
+    /// involved; a caller may keep the start and should say so.
+    pub fn cost_rose(&self) -> bool {
+        self.final_cost > self.start_cost
+    }
 }
 
 /// Why a refinement could not run.
@@ -321,6 +345,18 @@ fn huber(e: f64, k: f64) -> (f64, f64) {
     }
 }
 
+/// The model surface at the point faces away from the point's camera: `G > cos_max · |ray|`
+/// ([`SdfRefineConfig::back_facing_cos`]).
+#[inline(always)]
+pub(crate) fn faces_away(
+    gradient: &Vector3<f64>,
+    point: &DepthPoint,
+    rot_o_w: &Matrix3<f64>,
+    cos_max: f64,
+) -> bool {
+    depth_gain(gradient, point, rot_o_w) > cos_max * point.dp_dz_w.norm()
+}
+
 /// `G = ∂r/∂z = ∇ᵀ R_o_w ∂p_w/∂z` (eq 11): how much a point's SDF residual moves per metre
 /// of error in its measured depth.
 #[inline(always)]
@@ -409,7 +445,10 @@ fn accumulate(
                 let p_o = Point3::from(rot_o_w * point.p_w.coords + trans_o_w);
                 let s = sdf.sample(&p_o);
                 let r = s.distance_m;
-                if !s.inside_grid || r.abs() > gate_m {
+                if !s.inside_grid
+                    || r.abs() > gate_m
+                    || faces_away(&s.gradient, point, &rot_o_w, config.back_facing_cos)
+                {
                     // Truncated cost: an outlier costs what a residual at the gate would with
                     // the smallest σ any point can have (σ_model), at least as much as any
                     // inlier costs, so pushing points out of the gate never pays.
@@ -629,12 +668,17 @@ pub fn refine_sdf(
         normal = accumulate(sdf, points, &t_o_w, config, gates[kept_stage]);
         point_evaluations += points.len();
     }
+    // The start judged by the last stage's objective: the refiner's own evidence of whether it
+    // improved on it.
+    let start_cost = accumulate(sdf, points, t_o_w_initial, config, gates[kept_stage]).cost;
+    point_evaluations += points.len();
     let inliers = normal.inliers;
     Ok(RefineResult {
         t_o_w,
         status,
         iterations,
         final_cost: normal.cost,
+        start_cost,
         inliers,
         inlier_rms_m: if inliers > 0 {
             (normal.inlier_sq / inliers as f64).sqrt()
@@ -661,8 +705,9 @@ mod tests {
     enum Noise {
         /// Along the viewing ray, as a depth camera's; `dp_dz_w` is the ray.
         AlongRay,
-        /// Along the surface normal, with `dp_dz_w` the normal: the residual is then linear
-        /// in the noise (G = 1), so eq 18's first-order covariance is exact.
+        /// Along the surface normal, with `dp_dz_w` the inward normal (a ray meeting the face
+        /// head-on): the residual is then linear in the noise (G = −1), so eq 18's first-order
+        /// covariance is exact.
         AlongNormal,
     }
 
@@ -717,7 +762,7 @@ mod tests {
             }
             let direction = match noise {
                 Noise::AlongRay => ray,
-                Noise::AlongNormal => t_w_o.rotation * sdf.sample(&p_o).gradient.normalize(),
+                Noise::AlongNormal => -(t_w_o.rotation * sdf.sample(&p_o).gradient.normalize()),
             };
             let e: f64 = rng.sample::<f64, _>(StandardNormal) * sigma_total;
             out.push(DepthPoint {
@@ -769,6 +814,65 @@ mod tests {
         assert!(error.rotation.angle().to_degrees() < 0.05, "{error:?}");
         assert_eq!(result.status, RefineStatus::Converged, "{result:?}");
         assert!(result.covariance.is_some());
+        // 8 mm off, most points lie beyond the final gate at the start: its cost is far above
+        // the solution's, and the refiner knows it improved.
+        assert!(result.start_cost > 2.0 * result.final_cost, "{result:?}");
+        assert!(!result.cost_rose());
+        // Without iterations the pose stays, and the start is judged exactly as the end.
+        let still = SdfRefineConfig {
+            max_iterations: 0,
+            ..SdfRefineConfig::default()
+        };
+        let unmoved = refine_sdf(&sdf, &points, &initial, &still).unwrap();
+        assert_eq!(unmoved.t_o_w, initial);
+        assert_eq!(unmoved.start_cost, unmoved.final_cost);
+        assert!(!unmoved.cost_rose());
+    }
+
+    #[test]
+    fn a_thin_sheet_is_not_fitted_onto_its_back_face() {
+        // The Zigzag seen square onto its end legs' faces (normals ±y) from +y. Moving the model
+        // 1.5 mm (the sheet) towards the camera puts its back faces where the front faces'
+        // points are: the SDF is zero there too, and only the back-face test tells them apart.
+        // The refiner's 0.5 mm voxels: 1 mm ones barely resolve a 1.5 mm sheet.
+        let part = Part::Zigzag;
+        let config = SdfConfig {
+            voxel_size_m: REFINE_SDF_VOXEL_MM * 1e-3,
+            padding_m: 10e-3,
+        };
+        let sdf = SdfGrid::build(&part.mesh(), &config).unwrap();
+        let t_w_o = Isometry3::identity();
+        let eye = Point3::new(0.0, 0.6, 0.0);
+        let points = scan(&sdf, part, &t_w_o, &eye, 1e-9, Noise::AlongRay, 3);
+        let wrong_sheet = Isometry3::translation(0.0, 1.5e-3, 0.0);
+        let on = SdfRefineConfig::default();
+        let off = SdfRefineConfig {
+            back_facing_cos: f64::INFINITY,
+            ..on
+        };
+        let cost =
+            |t_w_o: &Isometry3<f64>, config| robust_cost(&sdf, &points, &t_w_o.inverse(), config);
+        // Without the test the wrong sheet costs less than a third of the outliers it has with
+        // it: the end legs' points sit on a zero set either way.
+        assert!(cost(&wrong_sheet, &off) < cost(&wrong_sheet, &on) / 3.0);
+        assert!(cost(&t_w_o, &on) <= cost(&t_w_o, &off) + 1e-9);
+        // The wrong sheet pulls no point back (the rejected points have no gradient), but the
+        // depth alignment, which applies the same test, moves it to the front faces (its 0.5 mm
+        // steps hold the 1.5 mm offset exactly), and the refinement stays there.
+        let aligned = crate::depth_alignment::align_depth(
+            &sdf,
+            &points,
+            &wrong_sheet.inverse(),
+            &crate::depth_alignment::DepthAlignmentConfig::default(),
+        )
+        .unwrap();
+        assert!(aligned.offset_m != 0.0, "{aligned:?}");
+        let result = refine_sdf(&sdf, &points, &aligned.t_o_w, &on).unwrap();
+        let error = result.t_o_w * t_w_o;
+        assert!(
+            error.translation.vector.norm() < 0.2e-3,
+            "{error:?} {result:?}"
+        );
     }
 
     #[test]

@@ -212,6 +212,7 @@ pub fn refine_header(
         views: views.min(u32::MAX as usize) as u32,
         mask_margin_m: settings.mask_margin_m,
         final_mask_margin_m: settings.final_mask_margin_m,
+        align_depth: settings.align_depth,
         background: settings.background.map(|b| v1::BackgroundPlane {
             normal_w: Some(v1::Vector3 {
                 x: b.normal_w.x,
@@ -412,6 +413,7 @@ pub fn decode_header(h: &v1::RefineHeader) -> Result<DecodedHeader, ConversionEr
         erode_px: h.erode_px,
         window_radius_px: h.window_radius_px,
         sigma,
+        align_depth: h.align_depth,
     };
     settings.validate().map_err(|e| match e {
         MultiviewError::Input { field, message } => ConversionError::new(field, message),
@@ -906,6 +908,7 @@ mod tests {
             }),
             erode_px: 3,
             window_radius_px: 3,
+            align_depth: true,
             sigma: RefineSigma::PatternImages,
         };
         let t_w_o = Isometry3::translation(0.1, -0.2, 0.5);

@@ -105,15 +105,20 @@ pub struct Masking {
     pub final_margin_m: f64,
     /// Points this close to the cell's known floor are dropped, metres.
     pub floor_clearance_m: f64,
+    /// Move each refinement's start along the viewing rays onto the depth first
+    /// ([`RefineSettings::align_depth`]).
+    pub align_depth: bool,
 }
 
 impl Default for Masking {
-    /// 10 mm (the detector's error), then 3 mm, and 2 mm above the floor.
+    /// 10 mm (the detector's error), then 3 mm, and 2 mm above the floor; the start aligned
+    /// onto the depth.
     fn default() -> Self {
         Self {
             margin_m: 10e-3,
             final_margin_m: 3e-3,
             floor_clearance_m: 2e-3,
+            align_depth: true,
         }
     }
 }
@@ -134,6 +139,7 @@ impl Masking {
             erode_px: camera.window_radius_px,
             window_radius_px: camera.window_radius_px,
             sigma: RefineSigma::PatternImages,
+            align_depth: self.align_depth,
         }
     }
 }

@@ -44,6 +44,10 @@ pub struct ActiveArgs {
     /// inter-reflection from its floor), beyond the paper.
     #[arg(long)]
     pub predict_bin: bool,
+    /// Refine from the detector's pose as given, without first moving it along the viewing
+    /// rays onto the depth (the alignment is on by default).
+    #[arg(long)]
+    pub no_align_depth: bool,
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -67,7 +71,10 @@ pub fn run_cmd(args: &ActiveArgs) -> anyhow::Result<()> {
         width_px: args.resolution.0,
         height_px: args.resolution.1,
         samples_per_pixel: args.spp,
-        masking: Masking::default(),
+        masking: Masking {
+            align_depth: !args.no_align_depth,
+            ..Masking::default()
+        },
         predict_with_bin: args.predict_bin,
     };
     println!(

@@ -56,6 +56,11 @@ pub struct RefineArgs {
     /// ground-truth metal (scenes are cached separately).
     #[arg(long)]
     pub matte: bool,
+    /// Every refiner starts from the detector's pose as given, not moved along the viewing
+    /// rays onto the depth first (the alignment, `glint_estimation::depth_alignment`, is on by
+    /// default, as in the sessions).
+    #[arg(long)]
+    pub no_align_depth: bool,
     /// Patterns the mock camera projects per view; it matches over all of them (space-time
     /// windows). Default: the camera's (8, chosen by `glint eval camera` on geometry with a
     /// known answer); 1 is the single-shot camera of earlier Table I runs.
@@ -105,6 +110,7 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
         sdf_gates_mm: args.sdf_gates_mm.clone(),
         tune_scenes: args.tune_scenes,
         matte: args.matte,
+        align_depth: !args.no_align_depth,
         shots: args.shots,
         window_radius_px: args
             .window_radius_px

@@ -446,6 +446,7 @@ mod tests {
                 erode_px: 1,
                 window_radius_px: 1,
                 sigma: RefineSigma::PatternImages,
+                align_depth: true,
             },
             const_sigma_z_m: 5e-4,
         };
