@@ -59,7 +59,7 @@ fn eval_refine_writes_auditable_results() {
     // Every group × view count × method is there, with the same trials for each method.
     for group in ["eye-bolt", "all"] {
         for k in [1, 2] {
-            let n: Vec<usize> = ["initial", "sdf", "icp"]
+            let n: Vec<usize> = ["initial", "aligned", "sdf", "icp", "icp_plane"]
                 .iter()
                 .map(|m| rows[&(group.to_owned(), k, m.to_string())].0)
                 .collect();
@@ -115,6 +115,23 @@ fn eval_refine_writes_auditable_results() {
         "{table}"
     );
     assert!(out.join("nees.csv").exists());
+    // The refiner's own verdict is tallied per part and view count, flagged ≤ all trials.
+    let notice = std::fs::read_to_string(out.join("notice.csv")).unwrap();
+    let all_1 = notice
+        .lines()
+        .find(|l| l.starts_with("all,1,"))
+        .expect("notice.csv has the all/1-view row");
+    let f: Vec<usize> = all_1
+        .split(',')
+        .skip(2)
+        .take(5)
+        .map(|x| x.parse().unwrap())
+        .collect();
+    // n, flagged, worse, caught, false alarms: caught + false alarms = flagged.
+    assert!(
+        f[1] <= f[0] && f[3] + f[4] == f[1] && f[3] <= f[2],
+        "{all_1}"
+    );
 
     // A rerun reads the cached scenes back and reproduces the same numbers.
     let again = glint(&args);

@@ -321,7 +321,7 @@ mod tests {
     use super::*;
     use glint_geometry::mesh::TriMesh;
     use glint_geometry::sdf::SdfConfig;
-    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+    use nalgebra::Vector3;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
 
@@ -416,17 +416,11 @@ mod tests {
         assert!((two[(2, 2)] - 2.0 * expected).abs() <= 1e-6 * expected);
     }
 
-    #[test]
-    fn the_fit_recovers_a_known_bias_and_cell() {
-        // 40 views of a patch whose 8 mm cells share a bias of σ_b = 0.15 mm, σ_z = 0.1 mm.
-        // 25 cells a view, 1000 cells in all: σ_b's relative standard error is about
-        // 1/√(2·1000) ≈ 2.2 %, so 10 % is over 4σ.
-        let truth = CorrelatedDepthError {
-            cell_m: 8e-3,
-            bias_sigma_m: 0.15e-3,
-        };
+    /// The fit over 40 patches whose depth errors follow `truth` (σ_z 0.1 mm, seeds from
+    /// `seed`), each at its true pose.
+    fn fit_patches(truth: &CorrelatedDepthError, seed: u64, cells_m: &[f64]) -> CorrelatedErrorFit {
         let views: Vec<(SdfGrid, Vec<DepthPoint>)> = (0..40)
-            .map(|s| biased_view(0.1e-3, &truth, 100 + s))
+            .map(|s| biased_view(0.1e-3, truth, seed + s))
             .collect();
         let known: Vec<KnownPoseView> = views
             .iter()
@@ -436,8 +430,19 @@ mod tests {
                 t_o_w: Isometry3::identity(),
             })
             .collect();
-        let fit =
-            fit_correlated_error(&known, &config(), &[2e-3, 8e-3, 32e-3, f64::INFINITY]).unwrap();
+        fit_correlated_error(&known, &config(), cells_m).unwrap()
+    }
+
+    #[test]
+    fn the_fit_recovers_a_known_bias_and_cell() {
+        // 40 views of a patch whose 8 mm cells share a bias of σ_b = 0.15 mm, σ_z = 0.1 mm.
+        // 25 cells a view, 1000 cells in all: σ_b's relative standard error is about
+        // 1/√(2·1000) ≈ 2.2 %, so 10 % is over 4σ.
+        let truth = CorrelatedDepthError {
+            cell_m: 8e-3,
+            bias_sigma_m: 0.15e-3,
+        };
+        let fit = fit_patches(&truth, 100, &[2e-3, 8e-3, 32e-3, f64::INFINITY]);
         assert_eq!(fit.best.cell_m, 8e-3, "{fit:?}");
         let rel = (fit.best.bias_sigma_m - truth.bias_sigma_m).abs() / truth.bias_sigma_m;
         assert!(rel < 0.1, "{fit:?}");
@@ -448,18 +453,11 @@ mod tests {
     fn independent_errors_fit_no_bias() {
         // Pure σ_z noise: the best σ_b is at most a few percent of σ_z (the search's floor or
         // noise: 40 × 1600 points pin the variance to ~0.6 %).
-        let views: Vec<(SdfGrid, Vec<DepthPoint>)> = (0..40)
-            .map(|s| biased_view(0.1e-3, &CorrelatedDepthError::INDEPENDENT, 300 + s))
-            .collect();
-        let known: Vec<KnownPoseView> = views
-            .iter()
-            .map(|(sdf, points)| KnownPoseView {
-                sdf,
-                points,
-                t_o_w: Isometry3::from_parts(Translation3::identity(), UnitQuaternion::identity()),
-            })
-            .collect();
-        let fit = fit_correlated_error(&known, &config(), &[8e-3, f64::INFINITY]).unwrap();
+        let fit = fit_patches(
+            &CorrelatedDepthError::INDEPENDENT,
+            300,
+            &[8e-3, f64::INFINITY],
+        );
         assert!(fit.best.bias_sigma_m < 0.03e-3, "{fit:?}");
     }
 

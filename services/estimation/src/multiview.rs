@@ -57,8 +57,9 @@ pub struct RefineSettings {
     pub window_radius_px: u32,
     /// Which depth σ the points are weighed with.
     pub sigma: RefineSigma,
-    /// Before refining, move the hypothesis along the points' viewing direction onto the depth
-    /// ([`crate::depth_alignment::align_depth`], ±30 mm): a template detector's worst axis.
+    /// Before refining, move the hypothesis along the first view's viewing direction onto that
+    /// view's depth ([`crate::depth_alignment::align_depth`], ±30 mm): the worst axis of a
+    /// template detector that looked from the first view.
     /// Absent from older journals: off.
     #[serde(default)]
     pub align_depth: bool,
@@ -279,11 +280,12 @@ pub fn refine_views(
     };
     let (points, mut view_points) = points_at(t_w_o, settings.mask_margin_m)?;
     // The hypothesis' own silhouette holds the part's pixels (a detector errs least across the
-    // image); only then is it moved along the rays onto their depth.
+    // image); only then is it moved along the first view's rays onto that view's depth (the
+    // detector's view; other views' rays would spread the search across its accurate axes).
     let start = if settings.align_depth {
         align_depth(
             grid,
-            &points,
+            &points[..view_points[0]],
             &t_w_o.inverse(),
             &DepthAlignmentConfig::default(),
         )

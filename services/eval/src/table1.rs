@@ -370,11 +370,19 @@ fn run_trial(
     let t_o_w_detector = (t_w_c * trial.t_c_o_init).inverse();
     let t_o_w_gt = (t_w_c * trial.t_c_o_gt).inverse();
     let points = trial_points(trial, scene);
-    // Every refiner's start.
+    // Every refiner's start: the detector's pose moved along its own camera's rays onto that
+    // view's depth (the other views' rays would spread the search across the detector's
+    // accurate axes).
+    let reference_points: Vec<DepthPoint> = scene.views[trial.reference]
+        .objects
+        .iter()
+        .filter(|o| o.instance == trial.instance)
+        .flat_map(|o| o.points.iter().copied())
+        .collect();
     let t_o_w_init = if settings.align_depth {
         align_depth(
             &refiners.sdf,
-            &points,
+            &reference_points,
             &t_o_w_detector,
             &DepthAlignmentConfig::default(),
         )
@@ -899,8 +907,8 @@ fn write_outputs(
          the same way, {} mm ({}); {:?}.\n",
         noise.describe(),
         if args.align_depth {
-            "every refiner starts from the initial pose moved along the trial's mean viewing direction onto its \
-             depth points (`glint_estimation::depth_alignment`: ±30 mm in 0.5 mm steps, the offset where most points \
+            "every refiner starts from the initial pose moved along the reference view's mean viewing direction onto \
+             that view's depth points (`glint_estimation::depth_alignment`: ±30 mm in 0.5 mm steps, the offset where most points \
              lie within 2 mm of a model face turned to their camera), the sessions' first step"
         } else {
             "every refiner starts from the initial pose itself (`--no-align-depth`)"
