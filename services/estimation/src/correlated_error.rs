@@ -44,28 +44,6 @@ impl CorrelatedDepthError {
         cell_m: f64::INFINITY,
         bias_sigma_m: 0.0,
     };
-
-    /// Checks the two numbers, naming the bad one.
-    pub fn validate(&self) -> Result<(), CorrelatedErrorInvalid> {
-        if self.cell_m.is_nan() || self.cell_m <= 0.0 {
-            return Err(CorrelatedErrorInvalid::CellSize(self.cell_m));
-        }
-        if !(self.bias_sigma_m.is_finite() && self.bias_sigma_m >= 0.0) {
-            return Err(CorrelatedErrorInvalid::BiasSigma(self.bias_sigma_m));
-        }
-        Ok(())
-    }
-}
-
-/// A [`CorrelatedDepthError`] that cannot describe a camera.
-#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
-pub enum CorrelatedErrorInvalid {
-    /// The cell edge is not positive (infinite is allowed: one cell per view).
-    #[error("cell_m {0}: the cell edge must be positive (metres; infinite for one cell a view)")]
-    CellSize(f64),
-    /// σ_b is negative or not finite.
-    #[error("bias_sigma_m {0}: the shared bias's σ must be finite and ≥ 0 (metres)")]
-    BiasSigma(f64),
 }
 
 /// One weighed point: Jacobian, `1/Σ_sdf`, `G` and residual, with its cell.
@@ -101,13 +79,14 @@ fn weighed_points(
         .filter_map(|point| {
             let p_o: Point3<f64> = t_o_w * point.p_w;
             let s = sdf.sample(&p_o);
+            let g = depth_gain(&s.gradient, point, &rot_o_w);
             if !s.inside_grid
                 || s.distance_m.abs() > config.final_gate_m
-                || faces_away(&s.gradient, point, &rot_o_w, config.back_facing_cos)
+                || faces_away(g, point, config.back_facing_cos)
             {
                 return None;
             }
-            let (j, w) = point_terms(&s.gradient, &p_o, point, &rot_o_w, model_var);
+            let (j, w) = point_terms(&s.gradient, &p_o, point, g, model_var);
             Some(WeighedPoint {
                 cell: [
                     cell_of(point.p_w.x),
@@ -116,7 +95,7 @@ fn weighed_points(
                 ],
                 j: Vector6::from(j),
                 w,
-                g: depth_gain(&s.gradient, point, &rot_o_w),
+                g,
                 r: s.distance_m,
             })
         })
@@ -266,8 +245,9 @@ pub fn fit_correlated_error(
             |sigma: f64| -> f64 { cells.iter().map(|c| c.log_likelihood(sigma * sigma)).sum() };
         independent_log_likelihood = ll(0.0);
         let sigma = golden_max(|ln_s| ll(ln_s.exp()), 1e-6f64.ln(), 1e-2f64.ln(), 60).exp();
-        let (sigma, log_likelihood) = if ll(sigma) > independent_log_likelihood {
-            (sigma, ll(sigma))
+        let at_sigma = ll(sigma);
+        let (sigma, log_likelihood) = if at_sigma > independent_log_likelihood {
+            (sigma, at_sigma)
         } else {
             (0.0, independent_log_likelihood)
         };
@@ -459,25 +439,5 @@ mod tests {
             &[8e-3, f64::INFINITY],
         );
         assert!(fit.best.bias_sigma_m < 0.03e-3, "{fit:?}");
-    }
-
-    #[test]
-    fn bad_numbers_are_named() {
-        let bad = CorrelatedDepthError {
-            cell_m: 0.0,
-            bias_sigma_m: 1e-4,
-        };
-        assert!(bad.validate().unwrap_err().to_string().contains("cell_m"));
-        let bad = CorrelatedDepthError {
-            cell_m: 1e-3,
-            bias_sigma_m: f64::NAN,
-        };
-        assert!(
-            bad.validate()
-                .unwrap_err()
-                .to_string()
-                .contains("bias_sigma_m")
-        );
-        assert!(CorrelatedDepthError::INDEPENDENT.validate().is_ok());
     }
 }

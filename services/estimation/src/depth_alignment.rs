@@ -10,7 +10,7 @@ use glint_geometry::sdf::SdfGrid;
 use nalgebra::{Isometry3, Translation3, Vector3};
 
 use crate::points::DepthPoint;
-use crate::refine::faces_away;
+use crate::refine::{depth_gain, faces_away};
 
 /// How [`align_depth`] searches. Lengths in metres.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -103,7 +103,11 @@ pub fn align_depth(
             let d = s.distance_m.abs();
             if s.inside_grid
                 && d <= config.inlier_m
-                && !faces_away(&s.gradient, p, &rot_o_w, config.back_facing_cos)
+                && !faces_away(
+                    depth_gain(&s.gradient, p, &rot_o_w),
+                    p,
+                    config.back_facing_cos,
+                )
             {
                 (sum + 1.0 - d / config.inlier_m, n + 1)
             } else {

@@ -345,16 +345,11 @@ fn huber(e: f64, k: f64) -> (f64, f64) {
     }
 }
 
-/// The model surface at the point faces away from the point's camera: `G > cos_max · |ray|`
-/// ([`SdfRefineConfig::back_facing_cos`]).
+/// The model surface at the point faces away from the point's camera: its depth gain
+/// `gain` ([`depth_gain`]) above `cos_max · |ray|` ([`SdfRefineConfig::back_facing_cos`]).
 #[inline(always)]
-pub(crate) fn faces_away(
-    gradient: &Vector3<f64>,
-    point: &DepthPoint,
-    rot_o_w: &Matrix3<f64>,
-    cos_max: f64,
-) -> bool {
-    depth_gain(gradient, point, rot_o_w) > cos_max * point.dp_dz_w.norm()
+pub(crate) fn faces_away(gain: f64, point: &DepthPoint, cos_max: f64) -> bool {
+    gain > cos_max * point.dp_dz_w.norm()
 }
 
 /// `G = ∂r/∂z = ∇ᵀ R_o_w ∂p_w/∂z` (eq 11): how much a point's SDF residual moves per metre
@@ -369,20 +364,19 @@ pub(crate) fn depth_gain(
 }
 
 /// One point's Jacobian `J = ∇ᵀ [I | −[p_o]×] = (∇, p_o × ∇)` (eq 10) and inverse residual
-/// variance `1/Σ_sdf` with `Σ_sdf = G² σ_z² + σ_model²`, `G = ∇ᵀ R_o_w ∂p_w/∂z` (eq 11), from
-/// the SDF gradient `gradient` at the point's object-frame position `p_o`.
+/// variance `1/Σ_sdf` with `Σ_sdf = G² σ_z² + σ_model²`, `G = gain` ([`depth_gain`], eq 11),
+/// from the SDF gradient `gradient` at the point's object-frame position `p_o`.
 #[inline(always)]
 pub(crate) fn point_terms(
     gradient: &Vector3<f64>,
     p_o: &Point3<f64>,
     point: &DepthPoint,
-    rot_o_w: &Matrix3<f64>,
+    gain: f64,
     model_var: f64,
 ) -> ([f64; 6], f64) {
     let n = gradient;
     let rot = p_o.coords.cross(n);
-    let gz = depth_gain(gradient, point, rot_o_w);
-    let var = gz * gz * point.sigma_z_m * point.sigma_z_m + model_var;
+    let var = gain * gain * point.sigma_z_m * point.sigma_z_m + model_var;
     ([n.x, n.y, n.z, rot.x, rot.y, rot.z], var.recip())
 }
 
@@ -411,7 +405,8 @@ pub fn information_of_points(
                 if !s.inside_grid {
                     continue;
                 }
-                let (j, inv_var) = point_terms(&s.gradient, &p_o, point, &rot_o_w, model_var);
+                let gain = depth_gain(&s.gradient, point, &rot_o_w);
+                let (j, inv_var) = point_terms(&s.gradient, &p_o, point, gain, model_var);
                 acc.add_outer(&j, inv_var);
             }
             acc
@@ -445,9 +440,10 @@ fn accumulate(
                 let p_o = Point3::from(rot_o_w * point.p_w.coords + trans_o_w);
                 let s = sdf.sample(&p_o);
                 let r = s.distance_m;
+                let gain = depth_gain(&s.gradient, point, &rot_o_w);
                 if !s.inside_grid
                     || r.abs() > gate_m
-                    || faces_away(&s.gradient, point, &rot_o_w, config.back_facing_cos)
+                    || faces_away(gain, point, config.back_facing_cos)
                 {
                     // Truncated cost: an outlier costs what a residual at the gate would with
                     // the smallest σ any point can have (σ_model), at least as much as any
@@ -455,7 +451,7 @@ fn accumulate(
                     acc.cost += outlier_cost;
                     continue;
                 }
-                let (j, inv_var) = point_terms(&s.gradient, &p_o, point, &rot_o_w, model_var);
+                let (j, inv_var) = point_terms(&s.gradient, &p_o, point, gain, model_var);
                 let e = r * inv_var.sqrt();
                 let (rho, weight) = huber(e, config.huber_k);
                 let w = weight * inv_var;

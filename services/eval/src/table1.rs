@@ -267,15 +267,6 @@ fn trials_of_scene(
     out
 }
 
-/// The stacked world points of the trial's instance over its views (eq 7, 19).
-fn trial_points(trial: &Trial, scene: &LoadedScene) -> Vec<DepthPoint> {
-    trial_view_points(trial, scene)
-        .into_iter()
-        .flatten()
-        .copied()
-        .collect()
-}
-
 /// The trial's instance's points, one slice per view (a shared depth bias stays within a view).
 fn trial_view_points<'a>(trial: &Trial, scene: &'a LoadedScene) -> Vec<&'a [DepthPoint]> {
     scene
@@ -369,20 +360,21 @@ fn run_trial(
     let t_c_w = t_w_c.inverse();
     let t_o_w_detector = (t_w_c * trial.t_c_o_init).inverse();
     let t_o_w_gt = (t_w_c * trial.t_c_o_gt).inverse();
-    let points = trial_points(trial, scene);
+    let view_points = trial_view_points(trial, scene);
+    // Stacked over the views (eq 7, 19).
+    let points: Vec<DepthPoint> = view_points.iter().flat_map(|v| v.iter().copied()).collect();
     // Every refiner's start: the detector's pose moved along its own camera's rays onto that
     // view's depth (the other views' rays would spread the search across the detector's
     // accurate axes).
-    let reference_points: Vec<DepthPoint> = scene.views[trial.reference]
+    let reference_points = scene.views[trial.reference]
         .objects
         .iter()
-        .filter(|o| o.instance == trial.instance)
-        .flat_map(|o| o.points.iter().copied())
-        .collect();
+        .find(|o| o.instance == trial.instance)
+        .map_or(&[][..], |o| o.points.as_slice());
     let t_o_w_init = if settings.align_depth {
         align_depth(
             &refiners.sdf,
-            &reference_points,
+            reference_points,
             &t_o_w_detector,
             &DepthAlignmentConfig::default(),
         )
@@ -421,7 +413,7 @@ fn run_trial(
                             nees(&r.t_o_w, &t_o_w_gt, &r.information, symmetry);
                         let correlated = information_with_correlated_error(
                             &refiners.sdf,
-                            &trial_view_points(trial, scene),
+                            &view_points,
                             &r.t_o_w,
                             &settings.sdf,
                             &settings.depth_error,
@@ -587,39 +579,36 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
                 known_views.push((index, o.points.clone(), t_o_w));
             }
         }
-        for (d, acc) in args.icp_distances_mm.iter().zip(per_distance.iter_mut()) {
-            let settings = RefinerSettings::tuning(REFINE_SDF_PADDING_MM, *d, args.align_depth);
+        // Adds each method's (hits at 2 mm/2°, trials) over the scene's trials to `counts`.
+        let tally = |settings: &RefinerSettings,
+                     methods: &[RefineMethod],
+                     counts: &mut [(usize, usize)]| {
             for t in &trials {
                 let outcomes = run_trial(
                     t,
                     &scene,
                     &refiners[index],
-                    &settings,
+                    settings,
                     &object.symmetry,
-                    &icp_variants,
+                    methods,
                 );
-                for (o, counts) in outcomes.iter().zip(acc.iter_mut()) {
-                    counts.1 += 1;
-                    counts.0 += o.deviation.is_correct(&CorrectThreshold::MM2_DEG2) as usize;
+                for (o, c) in outcomes.iter().zip(counts.iter_mut()) {
+                    c.1 += 1;
+                    c.0 += o.deviation.is_correct(&CorrectThreshold::MM2_DEG2) as usize;
                 }
             }
+        };
+        for (d, acc) in args.icp_distances_mm.iter().zip(per_distance.iter_mut()) {
+            let settings = RefinerSettings::tuning(REFINE_SDF_PADDING_MM, *d, args.align_depth);
+            tally(&settings, &icp_variants, acc);
         }
         for (g, counts) in args.sdf_gates_mm.iter().zip(per_gate.iter_mut()) {
             let settings = RefinerSettings::tuning(*g, args.icp_distances_mm[0], args.align_depth);
-            for t in &trials {
-                let outcomes = run_trial(
-                    t,
-                    &scene,
-                    &refiners[index],
-                    &settings,
-                    &object.symmetry,
-                    &[RefineMethod::Sdf],
-                );
-                counts.1 += 1;
-                counts.0 += outcomes[0]
-                    .deviation
-                    .is_correct(&CorrectThreshold::MM2_DEG2) as usize;
-            }
+            tally(
+                &settings,
+                &[RefineMethod::Sdf],
+                std::slice::from_mut(counts),
+            );
         }
         bar.inc(1);
     }
