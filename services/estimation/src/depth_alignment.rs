@@ -77,8 +77,22 @@ pub fn align_depth(
     let direction_w = points
         .iter()
         .filter_map(|p| p.dp_dz_w.try_normalize(1e-12))
-        .sum::<Vector3<f64>>()
-        .try_normalize(1e-12)?;
+        .sum::<Vector3<f64>>();
+    align_depth_along(sdf, points, t_o_w, &direction_w, config)
+}
+
+/// [`align_depth`] along a given world direction `direction_w` (any length but zero; unit
+/// in the result) instead of the points' own: the viewing ray of the camera a detector looked
+/// from, when the points come from another view. `None` as [`align_depth`], or for a
+/// direction of zero length.
+pub fn align_depth_along(
+    sdf: &SdfGrid,
+    points: &[DepthPoint],
+    t_o_w: &Isometry3<f64>,
+    direction_w: &Vector3<f64>,
+    config: &DepthAlignmentConfig,
+) -> Option<DepthAlignment> {
+    let direction_w = direction_w.try_normalize(1e-12)?;
     let usable = config.step_m.is_finite()
         && config.step_m > 0.0
         && config.range_m.is_finite()
@@ -163,17 +177,19 @@ mod tests {
             .collect()
     }
 
+    /// The Gear's SDF on a 1 mm grid.
+    fn gear_sdf() -> SdfGrid {
+        let config = SdfConfig {
+            voxel_size_m: 1e-3,
+            padding_m: 30e-3,
+        };
+        SdfGrid::build(&Part::Gear.mesh(), &config).unwrap()
+    }
+
     #[test]
     fn a_pose_off_in_depth_is_moved_back_onto_the_points() {
         let part = Part::Gear;
-        let sdf = SdfGrid::build(
-            &part.mesh(),
-            &SdfConfig {
-                voxel_size_m: 1e-3,
-                padding_m: 30e-3,
-            },
-        )
-        .unwrap();
+        let sdf = gear_sdf();
         let t_w_o = Isometry3::from_parts(
             Translation3::new(0.01, -0.02, 0.0),
             UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0),
@@ -200,6 +216,39 @@ mod tests {
                 (aligned.t_o_w.inverse().translation.vector - t_w_o.translation.vector).norm();
             assert!(left < 0.5e-3 + 1e-3, "{shift_mm} mm: {left} m left");
         }
+    }
+
+    #[test]
+    fn along_another_cameras_ray_the_detectors_depth_error_is_removed() {
+        // Points seen from a camera 40° off the detector's axis; the detector erred 15 mm
+        // along its own ray. Searching along the points' mean ray moves the pose along the
+        // wrong axis; along the detector's ray it lands within a step of the truth.
+        let part = Part::Gear;
+        let sdf = gear_sdf();
+        let t_w_o = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 0.02),
+            UnitQuaternion::from_euler_angles(0.2, 0.1, 0.4),
+        );
+        let angle = 40f64.to_radians();
+        let eye = Point3::new(0.6 * angle.sin(), 0.0, 0.6 * angle.cos());
+        let points = surface_points(part, &t_w_o, &eye);
+        let detector_ray = Vector3::new(0.0, 0.0, -1.0);
+        let off = Translation3::from(detector_ray * 15e-3) * t_w_o;
+        let config = DepthAlignmentConfig::default();
+        let aligned = align_depth_along(
+            &sdf,
+            &points,
+            &off.inverse(),
+            &(detector_ray * 3.0),
+            &config,
+        )
+        .unwrap();
+        assert!((aligned.direction_w - detector_ray).norm() < 1e-12);
+        let left = (aligned.t_o_w.inverse().translation.vector - t_w_o.translation.vector).norm();
+        assert!(left <= config.step_m + 1e-9, "{left} m left: {aligned:?}");
+        assert!(
+            align_depth_along(&sdf, &points, &off.inverse(), &Vector3::zeros(), &config).is_none()
+        );
     }
 
     #[test]

@@ -13,7 +13,9 @@
 //! - [`camera_validation`]: the mock camera against known geometry (depth error by shot
 //!   count and window, wrong depth by cause, the plane at 0.6 m);
 //! - [`capture_folder`]: mock captures written as BOP folders, and calibration captures;
-//! - [`policies`]: Fig. 9, the view policies compared;
+//! - [`policies`]: the view policies compared over whole sessions (the demo's loop);
+//! - [`fig9`]: Fig. 9 as the paper measures it: every policy chooses every view among the
+//!   same candidates, from the same detector guesses, on shared captures;
 //! - [`progress`]: progress bars for long runs.
 //!
 //! Evaluation code reads ground truth (to draw initial poses and to score); nothing that
@@ -27,6 +29,7 @@ pub mod bsdf_check;
 pub mod camera_validation;
 pub mod capture_folder;
 pub mod depth_uncertainty;
+pub mod fig9;
 pub mod initial_pose;
 pub mod metrics;
 pub mod policies;

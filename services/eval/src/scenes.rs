@@ -11,13 +11,15 @@ use glint_camera::dataset::bop::{
 };
 use glint_camera::dataset::rig_file::{read_rig_json, write_rig_json};
 use glint_camera::dataset::{PatternImage, StereoSide, write_png_u8};
+use glint_camera::materials;
 use glint_camera::record::{to_8bit, write_bop_image};
 use glint_camera::setup::{BinSetup, BinSetupSpec, capture_seed};
 use glint_estimation::depth_sigma::{NoiseModel, depth_sigma};
 use glint_estimation::points::{DepthPoint, DepthSigma, interior_mask, object_points};
 use glint_geometry::image::{Image, normalised_intensity};
+use glint_geometry::io::read_mesh;
 use glint_geometry::io::write_file_atomically;
-use glint_geometry::{Symmetry, TriMesh};
+use glint_geometry::{LengthUnit, Part, Symmetry, TriMesh};
 use glint_render::bsdf::PrincipledParams;
 use glint_render::rig::SliRig;
 use nalgebra::Isometry3;
@@ -34,6 +36,51 @@ pub struct EvalObject {
     pub symmetry: Symmetry,
     /// The ground-truth material the mock camera renders the object with.
     pub material: PrincipledParams<f32>,
+}
+
+/// The objects of an experiment: `parts` (painted with their true materials, or with the matte
+/// diffuse twin when `matte`), or instead the mesh file `mesh` (in `unit`, with `symmetry`),
+/// painted like the shiny Tube Fitting.
+pub fn eval_objects(
+    parts: &[Part],
+    mesh: Option<&Path>,
+    unit: LengthUnit,
+    symmetry: &Symmetry,
+    matte: bool,
+) -> anyhow::Result<Vec<EvalObject>> {
+    let paint = |part: Part| {
+        if matte {
+            materials::diffuse_twin()
+        } else {
+            materials::ground_truth(part)
+        }
+    };
+    if let Some(path) = mesh {
+        let loaded =
+            read_mesh(path, unit).with_context(|| format!("reading --mesh {}", path.display()))?;
+        for w in &loaded.warnings {
+            tracing::warn!("{}: {w}", path.display());
+        }
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "mesh".into());
+        return Ok(vec![EvalObject {
+            name,
+            mesh: loaded.mesh,
+            symmetry: symmetry.clone(),
+            material: paint(Part::TubeFitting),
+        }]);
+    }
+    Ok(parts
+        .iter()
+        .map(|&p| EvalObject {
+            name: p.name().into(),
+            mesh: p.mesh(),
+            symmetry: p.symmetry(),
+            material: paint(p),
+        })
+        .collect())
 }
 
 /// How mock-camera scenes are made.

@@ -10,7 +10,6 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
-use glint_camera::materials;
 use glint_estimation::correlated_error::{
     CorrelatedDepthError, CorrelatedErrorFit, KnownPoseView, fit_correlated_error,
     information_with_correlated_error,
@@ -21,7 +20,7 @@ use glint_estimation::points::DepthPoint;
 use glint_estimation::refine::{
     REFINE_SDF_PADDING_MM, SdfRefineConfig, refine_grid_config, refine_sdf,
 };
-use glint_geometry::io::{read_mesh, write_file_atomically};
+use glint_geometry::io::write_file_atomically;
 use glint_geometry::pose_deviation::{CorrectThreshold, PoseDeviation, pose_deviation};
 use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use glint_geometry::{LengthUnit, Part, Symmetry};
@@ -32,7 +31,8 @@ use rand::seq::IndexedRandom;
 use crate::initial_pose::InitialPoseNoise;
 use crate::metrics::{chi2_mean_band, mcnemar_exact_p, mean, median, nees};
 use crate::scenes::{
-    EvalObject, LoadedScene, OBJ_ID, SceneSpec, capture_config, ensure_scene, load_scene,
+    EvalObject, LoadedScene, OBJ_ID, SceneSpec, capture_config, ensure_scene, eval_objects,
+    load_scene,
 };
 
 /// The settings of one Table I run (`glint eval refine`'s flags).
@@ -190,42 +190,6 @@ struct Nees {
     /// scenes.
     correlated: f64,
     dof: usize,
-}
-
-fn objects(args: &RefineExperiment) -> anyhow::Result<Vec<EvalObject>> {
-    if let Some(path) = &args.mesh {
-        let loaded = read_mesh(path, args.unit)
-            .with_context(|| format!("reading --mesh {}", path.display()))?;
-        for w in &loaded.warnings {
-            tracing::warn!("{}: {w}", path.display());
-        }
-        let name = path
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "mesh".into());
-        return Ok(vec![EvalObject {
-            name,
-            mesh: loaded.mesh,
-            symmetry: args.symmetry.clone(),
-            // A user's part is painted like the shiny Tube Fitting.
-            material: materials::ground_truth(Part::TubeFitting),
-        }]);
-    }
-    Ok(args
-        .parts
-        .iter()
-        .copied()
-        .map(|p| EvalObject {
-            name: p.name().into(),
-            mesh: p.mesh(),
-            symmetry: p.symmetry(),
-            material: if args.matte {
-                materials::diffuse_twin()
-            } else {
-                materials::ground_truth(p)
-            },
-        })
-        .collect())
 }
 
 /// Every trial of a scene: each instance ≥ 80 % visible in a reference view, with that view
@@ -506,7 +470,13 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
             "--sdf-gates-mm: give gates above 0 and at most the SDF grid's padding, {REFINE_SDF_PADDING_MM} mm, e.g. 10,20,30"
         );
     }
-    let objects = objects(args)?;
+    let objects = eval_objects(
+        &args.parts,
+        args.mesh.as_deref(),
+        args.unit,
+        &args.symmetry,
+        args.matte,
+    )?;
     let rig =
         glint_render::rig::SliRig::ensenso_n35().resized(args.resolution.0, args.resolution.1)?;
     let window_radius_px = args.window_radius_px;

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use glint_eval::table1::RefineExperiment;
-use glint_geometry::{LengthUnit, Part, Symmetry};
+use glint_geometry::{LengthUnit, Symmetry};
 
 #[derive(clap::Args)]
 pub struct RefineArgs {
@@ -86,14 +86,7 @@ pub struct RefineArgs {
 }
 
 pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
-    let parts = if args.parts == "all" {
-        Part::ALL.to_vec()
-    } else {
-        args.parts
-            .split(',')
-            .map(|s| s.trim().parse::<Part>().map_err(anyhow::Error::msg))
-            .collect::<anyhow::Result<_>>()?
-    };
+    let parts = super::parse_parts(&args.parts)?;
     let experiment = RefineExperiment {
         parts,
         mesh: args.mesh.clone(),

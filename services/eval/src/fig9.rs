@@ -1,0 +1,1006 @@
+//! The paper's Fig. 9 on mock-camera data, measured as the paper measures it (`glint eval
+//! nbv`): every view policy chooses every view it uses — the first one included — among the
+//! same candidates on the spherical cap, from the same initial pose hypotheses (a detector's,
+//! drawn at a detection view), with the same refiner on the same segmented depth.
+//!
+//! - **NBV** (ours) and **NBV with constant σ_z** choose by the least predicted pose entropy
+//!   (eq 20–23): the render workers' prediction of each open candidate (eq 14–17, 21–22; the
+//!   constant-σ baseline uses visibility and Jacobians only) from the current estimate, with
+//!   the part's *fitted* material and *calibrated* response — never the simulator's;
+//! - **Random** uniformly among the open candidates, averaged over several draws;
+//! - **Max-Distance** the candidate furthest from the detection view and every view taken.
+//!
+//! The loop is the paper's: capture the chosen view, refine on all views so far (from the
+//! previous estimate; the first from the hypothesis moved along the detection view's ray onto
+//! the first view's depth — the detector errs most along its own ray, and the cell knows where
+//! it looked from), choose again. The part's pixels in a
+//! view are its visible mask, eroded by the matching window — the stand-in for the paper's
+//! instance segmentation network, as in Table I. The mock camera captures a view when a policy
+//! first picks it; the capture is shared by every trial and policy of the scene.
+//!
+//! Evaluation code: the truth places the detector's guess, the segmentation and the scores;
+//! the predictions and refinements never see it.
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::Context;
+use glint_camera::setup::{BinSetup, BinSetupSpec, capture_seed};
+use glint_camera::visibility::instance_visibility;
+use glint_estimation::depth_alignment::{DepthAlignmentConfig, align_depth_along};
+use glint_estimation::nbv::{
+    PosePrior, max_distance_view, plan_next_view, pose_entropy_nats, random_view,
+};
+use glint_estimation::points::DepthPoint;
+use glint_estimation::refine::{RefineStatus, SdfRefineConfig, refine_grid_config, refine_sdf};
+use glint_estimation::view::{SigmaSource, points_in_mask, view_sigma};
+use glint_geometry::io::write_file_atomically;
+use glint_geometry::pose_deviation::{CorrectThreshold, PoseDeviation, pose_deviation};
+use glint_geometry::sdf::SdfGrid;
+use glint_orchestrator::local::{LocalPrediction, MockCamera};
+use glint_orchestrator::session::{CONST_SIGMA_Z_M, ViewPolicy};
+use glint_orchestrator::stages::{
+    CameraStage, PredictionObject, PredictionRequest, PredictionStage, SessionObject,
+};
+use nalgebra::{Isometry3, Matrix6};
+use rand::SeedableRng;
+use rayon::prelude::*;
+
+use crate::active::{Calibration, prediction_object_for};
+use crate::initial_pose::InitialPoseNoise;
+use crate::metrics::paired_sign_flip_p;
+use crate::scenes::{EvalObject, SceneSpec, capture_config};
+
+/// A part of the experiment with its calibration (what the render workers know of it).
+#[derive(Clone, Debug)]
+pub struct NbvObject {
+    /// The part: mesh, symmetry and the material the mock camera paints it with.
+    pub object: EvalObject,
+    /// Its fitted material and calibrated response (`glint calibrate …`), never the truth.
+    pub calibration: Calibration,
+}
+
+/// The settings of one Fig. 9 run (`glint eval nbv`'s flags).
+#[derive(Clone, Debug)]
+pub struct NbvExperiment {
+    /// The parts, each with its calibration.
+    pub objects: Vec<NbvObject>,
+    /// Bins per part.
+    pub scenes: u32,
+    /// Detection views per bin: trials start from a detector's guess at each of these
+    /// candidates (spread evenly over the candidate list), for every instance at least
+    /// `min_visib_fract` visible there.
+    pub detection_views: u32,
+    /// Views each policy takes per trial.
+    pub max_views: usize,
+    /// Candidate views on the cap above each bin (the detection views among them).
+    pub candidates: usize,
+    /// Parts per bin.
+    pub instances: u32,
+    /// Base seed: bin `s` has seed `seed·10⁴ + 8000 + s` (apart from Table I's evaluation and
+    /// tuning bins); it also seeds the detector's guesses and the random draws.
+    pub seed: u64,
+    /// Camera resolution, px.
+    pub resolution: (u32, u32),
+    /// Samples per pixel of the mock camera's renders.
+    pub spp: u32,
+    /// Patterns the mock camera projects per view.
+    pub shots: u32,
+    /// The mock camera's matching window radius, px.
+    pub window_radius_px: u32,
+    /// The policies compared.
+    pub policies: Vec<ViewPolicy>,
+    /// Draws of the Random policy per trial (its rates are their mean).
+    pub random_draws: u32,
+    /// An instance is a trial from a detection view where at least this share of it is
+    /// visible (Table I's 0.8).
+    pub min_visib_fract: f64,
+    /// The render workers render the bin with the part (beyond the paper).
+    pub predict_with_bin: bool,
+    /// Output directory.
+    pub out: PathBuf,
+}
+
+/// The policy's name in the output files (`nbv`, `nbv_const_sigma`, `random`, `max_distance`).
+pub fn policy_column(policy: ViewPolicy) -> &'static str {
+    match policy {
+        ViewPolicy::Nbv => "nbv",
+        ViewPolicy::NbvConstSigma => "nbv_const_sigma",
+        ViewPolicy::Random => "random",
+        ViewPolicy::MaxDistance => "max_distance",
+    }
+}
+
+/// One refinement problem: an instance of a bin and a detector's guess of its pose.
+#[derive(Clone, Debug)]
+struct Trial {
+    part: usize,
+    scene: u32,
+    detection_view: usize,
+    /// The detection view's left camera → world.
+    detection_t_w_c: Isometry3<f64>,
+    /// Index of the instance among the bin's poses.
+    instance: usize,
+    gt_t_w_o: Isometry3<f64>,
+    initial_t_w_o: Isometry3<f64>,
+}
+
+/// One policy's run on one trial.
+#[derive(Clone, Debug)]
+struct Run {
+    trial: usize,
+    policy: ViewPolicy,
+    /// Which draw of the Random policy (0 for the others).
+    draw: u32,
+    views: Vec<usize>,
+    t_w_o: Isometry3<f64>,
+    information: Matrix6<f64>,
+    /// The entropy the policy predicted for the view it chose last (entropy policies).
+    predicted_entropy_nats: Option<f64>,
+    predict_ms: f64,
+}
+
+/// One step of one run: the pose after `views` views.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct StepRow {
+    /// The part's name.
+    pub part: String,
+    /// The bin's index among the part's bins.
+    pub scene: u32,
+    /// The candidate the detector looked from.
+    pub detection_view: usize,
+    /// The instance's index among the bin's parts.
+    pub instance: usize,
+    /// The policy ([`policy_column`]).
+    pub policy: &'static str,
+    /// Which draw of the Random policy (0 for the others).
+    pub draw: u32,
+    /// Views taken so far.
+    pub views: usize,
+    /// The candidate taken at this step.
+    pub view: usize,
+    /// Points of the instance in this view.
+    pub view_points: usize,
+    /// Translation error of the pose against the truth (symmetry-aware), mm.
+    pub err_mm: f64,
+    /// Rotation error of the pose against the truth (symmetry-aware), degrees.
+    pub err_deg: f64,
+    /// Pose entropy after the step (eq 18's information with the prior), nats.
+    pub entropy_nats: f64,
+    /// The entropy the policy predicted for this view (entropy policies), nats.
+    pub predicted_entropy_nats: Option<f64>,
+    /// The refinement's outcome (`converged`, `max_iterations`, `diverged`, `no points`, or
+    /// the error).
+    pub status: String,
+    /// Time the decision for this view spent predicting candidates, ms.
+    pub predict_ms: f64,
+    /// The initial pose's error (translation mm, rotation degrees) against the truth.
+    pub initial_err_mm: f64,
+    /// See `initial_err_mm`.
+    pub initial_err_deg: f64,
+}
+
+impl StepRow {
+    fn correct(&self, threshold: &CorrectThreshold) -> bool {
+        self.err_mm * 1e-3 < threshold.translation_m
+            && self.err_deg.to_radians() < threshold.rotation_rad
+    }
+}
+
+/// A captured view as the trials use it: each instance's segmented depth points with σ_z.
+struct ViewCapture {
+    /// Per instance (index into the bin's poses), its points (world frame, eq 1–7).
+    points: Vec<Vec<DepthPoint>>,
+}
+
+/// Captures candidate `view` of `camera` and segments it: σ_z from the pattern images
+/// (eq 1–5), each instance's visible mask eroded by `erode_px` (the stand-in segmentation).
+fn capture_view(
+    camera: &MockCamera,
+    t_w_c: &Isometry3<f64>,
+    seed: u64,
+    window_radius_px: u32,
+) -> anyhow::Result<ViewCapture> {
+    let view = camera
+        .capture(t_w_c, seed)
+        .map_err(|e| anyhow::anyhow!("capture: {e}"))?
+        .measurement;
+    let sigma = view_sigma(
+        &view,
+        &SigmaSource::PatternImages {
+            window_radius_px,
+            noise: None,
+        },
+    )?;
+    let setup = &camera.setup;
+    let [left, _] = setup.rig.cameras(t_w_c);
+    let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
+    let points = instance_visibility(&setup.scene, &left, &labels)
+        .iter()
+        .map(|v| {
+            let mask = v.mask_visib.map(|m| m > 0);
+            Ok(points_in_mask(&view, &mask, &sigma, window_radius_px)?.points)
+        })
+        .collect::<anyhow::Result<_>>()?;
+    Ok(ViewCapture { points })
+}
+
+/// The candidates the trials' detectors look from: `count` spread evenly over `candidates`.
+fn detection_views(count: u32, candidates: usize) -> Vec<usize> {
+    let count = (count as usize).clamp(1, candidates);
+    (0..count).map(|i| i * candidates / count).collect()
+}
+
+/// The decision of one run: its next view, the entropy predicted for it and the time spent
+/// predicting.
+fn choose(
+    run: &Run,
+    trial: &Trial,
+    candidates: &[Isometry3<f64>],
+    prediction: &(LocalPrediction, PredictionObject),
+    prior: &PosePrior,
+    seed: u64,
+) -> anyhow::Result<(usize, Option<f64>, f64)> {
+    let step = run.views.len();
+    let run_seed =
+        seed ^ (trial_key(trial) << 8) ^ u64::from(run.draw).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    let Some(sigma) = run.policy.prediction(CONST_SIGMA_Z_M) else {
+        let view = match run.policy {
+            ViewPolicy::Random => random_view(candidates.len(), &run.views, run_seed, step)?,
+            _ => {
+                // Furthest from the detection view and every view taken.
+                let mut from = run.views.clone();
+                from.push(trial.detection_view);
+                max_distance_view(candidates, &from)?
+            }
+        };
+        return Ok((view, None, 0.0));
+    };
+    let (workers, object) = prediction;
+    let request = PredictionRequest {
+        t_w_o: run.t_w_o,
+        candidates: candidates
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !run.views.contains(i))
+            .map(|(i, t)| (i as u32, *t))
+            .collect(),
+        sigma,
+        seed: run_seed,
+        with_maps: false,
+    };
+    let started = Instant::now();
+    let predicted = workers
+        .predict(object, &request)
+        .map_err(|e| anyhow::anyhow!("predicting: {e}"))?;
+    let predict_ms = started.elapsed().as_secs_f64() * 1e3;
+    let mut informations = vec![Matrix6::zeros(); candidates.len()];
+    for p in &predicted {
+        if let Some(slot) = informations.get_mut(p.index as usize) {
+            *slot = p.information;
+        }
+    }
+    let plan = plan_next_view(&run.information, &informations, &run.views, prior)?;
+    let h = plan.entropies_nats.get(plan.chosen).copied().flatten();
+    Ok((plan.chosen, h, predict_ms))
+}
+
+/// A number naming a trial (its part, bin, detection view and instance) for seeds.
+fn trial_key(trial: &Trial) -> u64 {
+    (trial.part as u64) << 40
+        | u64::from(trial.scene) << 24
+        | (trial.detection_view as u64) << 12
+        | trial.instance as u64
+}
+
+/// The refinement after a run's newest view: all its views' points of the trial's instance,
+/// from the previous estimate (the first from the hypothesis aligned along the first view's
+/// rays onto its depth). Returns the status; a run whose views hold no points keeps its pose.
+fn refine_run(
+    run: &mut Run,
+    trial: &Trial,
+    captures: &HashMap<usize, ViewCapture>,
+    grid: &SdfGrid,
+    config: &SdfRefineConfig,
+) -> String {
+    let of = |v: &usize| {
+        captures
+            .get(v)
+            .and_then(|c| c.points.get(trial.instance))
+            .map_or(&[][..], |p| p.as_slice())
+    };
+    let points: Vec<DepthPoint> = run
+        .views
+        .iter()
+        .flat_map(|v| of(v).iter().copied())
+        .collect();
+    if points.is_empty() {
+        return "no points".into();
+    }
+    let mut t_o_w = run.t_w_o.inverse();
+    if run.views.len() == 1 {
+        // The detector errs along its own viewing ray, whichever view the depth comes from.
+        let ray_w = run.t_w_o.translation.vector - trial.detection_t_w_c.translation.vector;
+        t_o_w = align_depth_along(
+            grid,
+            &points,
+            &t_o_w,
+            &ray_w,
+            &DepthAlignmentConfig::default(),
+        )
+        .map_or(t_o_w, |a| a.t_o_w);
+    }
+    match refine_sdf(grid, &points, &t_o_w, config) {
+        Ok(r) if r.status != RefineStatus::Diverged => {
+            run.t_w_o = r.t_o_w.inverse();
+            run.information = r.information;
+            format!("{:?}", r.status).to_lowercase()
+        }
+        Ok(_) => "diverged".into(),
+        Err(e) => format!("error: {e}"),
+    }
+}
+
+/// Runs the experiment; `on_scene` is told after each bin (part name, bin, trials). Returns
+/// every step of every run.
+pub fn run(
+    spec: &NbvExperiment,
+    mut on_scene: impl FnMut(&str, u32, usize),
+) -> anyhow::Result<Vec<StepRow>> {
+    anyhow::ensure!(!spec.objects.is_empty(), "parts: at least one");
+    anyhow::ensure!(!spec.policies.is_empty(), "policies: at least one");
+    anyhow::ensure!(spec.scenes >= 1, "scenes: at least one bin");
+    anyhow::ensure!(
+        (1..=spec.candidates).contains(&spec.max_views),
+        "max_views: 1 to the {} candidates",
+        spec.candidates
+    );
+    anyhow::ensure!(spec.random_draws >= 1, "random_draws: at least one");
+    let rig =
+        glint_render::rig::SliRig::ensenso_n35().resized(spec.resolution.0, spec.resolution.1)?;
+    let scene_spec = SceneSpec {
+        matcher: String::new(),
+        window_radius_px: spec.window_radius_px,
+        shots: spec.shots,
+        instances: spec.instances,
+        views: spec.candidates as u32,
+        width_px: spec.resolution.0,
+        height_px: spec.resolution.1,
+        spp: spec.spp,
+    };
+    let config = capture_config(&rig, &scene_spec).context("the camera's settings")?;
+    let refine_config = SdfRefineConfig::default();
+    let prior = PosePrior::default();
+    let noise = InitialPoseNoise::default();
+    let mut rows = Vec::new();
+    for (part_index, part) in spec.objects.iter().enumerate() {
+        let object = &part.object;
+        let grid = SdfGrid::build(&object.mesh, &refine_grid_config())
+            .with_context(|| format!("SDF of {}", object.name))?;
+        let session_object = SessionObject {
+            name: object.name.clone(),
+            mesh_sha256_hex: object.mesh.content_sha256_hex(),
+            mesh: Arc::new(object.mesh.clone()),
+        };
+        for s in 0..spec.scenes {
+            let scene_seed = spec
+                .seed
+                .wrapping_mul(10_000)
+                .wrapping_add(8000 + u64::from(s));
+            let mut setup = BinSetup::new(
+                &object.mesh,
+                object.material,
+                &BinSetupSpec {
+                    instances: spec.instances,
+                    seed: scene_seed,
+                    width_px: spec.resolution.0,
+                    height_px: spec.resolution.1,
+                    samples_per_pixel: spec.spp,
+                },
+            )
+            .with_context(|| format!("{} bin {s}", object.name))?;
+            setup.config = config.clone();
+            let candidates = setup.views(spec.candidates);
+            let camera = MockCamera { setup };
+            let prediction = (
+                LocalPrediction::default(),
+                prediction_object_for(
+                    &camera,
+                    &candidates[0],
+                    &session_object,
+                    &part.calibration,
+                    spec.predict_with_bin,
+                )?,
+            );
+            // Trials: every instance visible enough from each detection view, its pose guessed
+            // there by the stand-in detector.
+            let setup = &camera.setup;
+            let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
+            let mut trials = Vec::new();
+            for d in detection_views(spec.detection_views, candidates.len()) {
+                let [left, _] = setup.rig.cameras(&candidates[d]);
+                let t_c_w = candidates[d].inverse();
+                for (instance, v) in instance_visibility(&setup.scene, &left, &labels)
+                    .iter()
+                    .enumerate()
+                {
+                    if v.visib_fract < spec.min_visib_fract {
+                        continue;
+                    }
+                    let gt_t_w_o = setup.poses[instance];
+                    let mut trial = Trial {
+                        part: part_index,
+                        scene: s,
+                        detection_view: d,
+                        detection_t_w_c: candidates[d],
+                        instance,
+                        gt_t_w_o,
+                        initial_t_w_o: gt_t_w_o,
+                    };
+                    let mut rng =
+                        rand_pcg::Pcg64::seed_from_u64(spec.seed ^ trial_key(&trial) ^ 0xF19);
+                    let t_c_o = noise.draw(&(t_c_w * gt_t_w_o), &object.symmetry, &mut rng);
+                    trial.initial_t_w_o = candidates[d] * t_c_o;
+                    trials.push(trial);
+                }
+            }
+            let mut runs: Vec<Run> = Vec::new();
+            for (t, trial) in trials.iter().enumerate() {
+                for &policy in &spec.policies {
+                    let draws = if policy == ViewPolicy::Random {
+                        spec.random_draws
+                    } else {
+                        1
+                    };
+                    for draw in 0..draws {
+                        runs.push(Run {
+                            trial: t,
+                            policy,
+                            draw,
+                            views: Vec::new(),
+                            t_w_o: trial.initial_t_w_o,
+                            information: Matrix6::zeros(),
+                            predicted_entropy_nats: None,
+                            predict_ms: 0.0,
+                        });
+                    }
+                }
+            }
+            let mut captures: HashMap<usize, ViewCapture> = HashMap::new();
+            for _step in 0..spec.max_views {
+                // 1. Every run chooses its next view (the renders are parallel inside too).
+                let choices: Vec<(usize, Option<f64>, f64)> = runs
+                    .par_iter()
+                    .map(|r| {
+                        choose(
+                            r,
+                            &trials[r.trial],
+                            &candidates,
+                            &prediction,
+                            &prior,
+                            spec.seed,
+                        )
+                    })
+                    .collect::<anyhow::Result<_>>()?;
+                // 2. The views no run has seen yet are captured, once each.
+                let mut needed: Vec<usize> = choices.iter().map(|c| c.0).collect();
+                needed.sort_unstable();
+                needed.dedup();
+                for v in needed {
+                    if let std::collections::hash_map::Entry::Vacant(e) = captures.entry(v) {
+                        e.insert(capture_view(
+                            &camera,
+                            &candidates[v],
+                            capture_seed(scene_seed, v),
+                            spec.window_radius_px,
+                        )?);
+                    }
+                }
+                // 3. Every run refines on its views so far.
+                let statuses: Vec<String> = runs
+                    .par_iter_mut()
+                    .zip(&choices)
+                    .map(|(r, &(view, h, ms))| {
+                        r.views.push(view);
+                        r.predicted_entropy_nats = h;
+                        r.predict_ms = ms;
+                        refine_run(r, &trials[r.trial], &captures, &grid, &refine_config)
+                    })
+                    .collect();
+                for (r, status) in runs.iter().zip(statuses) {
+                    let trial = &trials[r.trial];
+                    let deviation = |t_w_o: &Isometry3<f64>| -> PoseDeviation {
+                        pose_deviation(t_w_o, &trial.gt_t_w_o, &object.symmetry)
+                    };
+                    let (d, d0) = (deviation(&r.t_w_o), deviation(&trial.initial_t_w_o));
+                    let view = r.views.last().copied().unwrap_or_default();
+                    rows.push(StepRow {
+                        part: object.name.clone(),
+                        scene: s,
+                        detection_view: trial.detection_view,
+                        instance: trial.instance,
+                        policy: policy_column(r.policy),
+                        draw: r.draw,
+                        views: r.views.len(),
+                        view,
+                        view_points: captures
+                            .get(&view)
+                            .and_then(|c| c.points.get(trial.instance))
+                            .map_or(0, Vec::len),
+                        err_mm: d.translation_mm(),
+                        err_deg: d.rotation_deg(),
+                        entropy_nats: pose_entropy_nats(&r.information, &prior)?,
+                        predicted_entropy_nats: r.predicted_entropy_nats,
+                        status,
+                        predict_ms: r.predict_ms,
+                        initial_err_mm: d0.translation_mm(),
+                        initial_err_deg: d0.rotation_deg(),
+                    });
+                }
+            }
+            on_scene(&object.name, s, trials.len());
+        }
+    }
+    Ok(rows)
+}
+
+/// One cell of the results: a part (or `all`), a policy and a view count.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RateRow {
+    /// The part's name, or `all`.
+    pub part: String,
+    /// The policy ([`policy_column`]).
+    pub policy: &'static str,
+    /// Views taken.
+    pub views: usize,
+    /// Trials.
+    pub n: usize,
+    /// Share of trials within 5 mm/5° (Random: the mean over its draws).
+    pub rate_5mm5deg: f64,
+    /// Share of trials within 2 mm/2°.
+    pub rate_2mm2deg: f64,
+}
+
+/// Per trial (part, bin, detection view, instance) and view count, each policy's success at
+/// `threshold`, Random's averaged over its draws.
+type TrialKey = (String, u32, usize, usize, usize);
+
+fn successes(
+    rows: &[StepRow],
+    threshold: &CorrectThreshold,
+) -> HashMap<(&'static str, TrialKey), f64> {
+    let mut sums: HashMap<(&'static str, TrialKey), (f64, usize)> = HashMap::new();
+    for r in rows {
+        let key = (
+            r.policy,
+            (
+                r.part.clone(),
+                r.scene,
+                r.detection_view,
+                r.instance,
+                r.views,
+            ),
+        );
+        let e = sums.entry(key).or_default();
+        e.0 += f64::from(u8::from(r.correct(threshold)));
+        e.1 += 1;
+    }
+    sums.into_iter()
+        .map(|(k, (s, n))| (k, s / n as f64))
+        .collect()
+}
+
+/// The rates per part (and `all`), policy and view count.
+pub fn rates(rows: &[StepRow], policies: &[ViewPolicy], max_views: usize) -> Vec<RateRow> {
+    let five = successes(rows, &CorrectThreshold::MM5_DEG5);
+    let two = successes(rows, &CorrectThreshold::MM2_DEG2);
+    let mut parts: Vec<String> = Vec::new();
+    for r in rows {
+        if !parts.contains(&r.part) {
+            parts.push(r.part.clone());
+        }
+    }
+    parts.push("all".into());
+    let mut out = Vec::new();
+    for part in &parts {
+        for &policy in policies {
+            let name = policy_column(policy);
+            for views in 1..=max_views {
+                let keep = |k: &(&'static str, TrialKey)| {
+                    k.0 == name && k.1.4 == views && (part == "all" || &k.1.0 == part)
+                };
+                let hits: Vec<f64> = five.iter().filter(|(k, _)| keep(k)).map(|e| *e.1).collect();
+                let hits2: Vec<f64> = two.iter().filter(|(k, _)| keep(k)).map(|e| *e.1).collect();
+                if hits.is_empty() {
+                    continue;
+                }
+                let n = hits.len();
+                out.push(RateRow {
+                    part: part.clone(),
+                    policy: name,
+                    views,
+                    n,
+                    rate_5mm5deg: hits.iter().sum::<f64>() / n as f64,
+                    rate_2mm2deg: hits2.iter().sum::<f64>() / n as f64,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// NBV against another policy on the same trials at one view count and threshold.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PairedRow {
+    /// The part's name, or `all`.
+    pub part: String,
+    /// The policy NBV is compared with.
+    pub other: &'static str,
+    /// Views taken.
+    pub views: usize,
+    /// `5mm5deg` or `2mm2deg`.
+    pub threshold: &'static str,
+    /// Trials both policies ran.
+    pub n: usize,
+    /// NBV's rate minus the other's, percentage points.
+    pub margin_points: f64,
+    /// Two-sided p of the paired sign-flip test on the per-trial differences.
+    pub p: f64,
+}
+
+/// NBV against every other policy, per part and `all`, view count and threshold.
+pub fn paired(rows: &[StepRow], policies: &[ViewPolicy], max_views: usize) -> Vec<PairedRow> {
+    let mut out = Vec::new();
+    if !policies.contains(&ViewPolicy::Nbv) {
+        return out;
+    }
+    let mut parts: Vec<String> = Vec::new();
+    for r in rows {
+        if !parts.contains(&r.part) {
+            parts.push(r.part.clone());
+        }
+    }
+    parts.push("all".into());
+    for (threshold_name, threshold) in [
+        ("5mm5deg", CorrectThreshold::MM5_DEG5),
+        ("2mm2deg", CorrectThreshold::MM2_DEG2),
+    ] {
+        let s = successes(rows, &threshold);
+        for part in &parts {
+            for &other in policies.iter().filter(|p| **p != ViewPolicy::Nbv) {
+                for views in 1..=max_views {
+                    let mut d: Vec<f64> = s
+                        .iter()
+                        .filter(|((p, k), _)| {
+                            *p == "nbv" && k.4 == views && (part == "all" || &k.0 == part)
+                        })
+                        .filter_map(|((_, k), &nbv)| {
+                            Some(nbv - s.get(&(policy_column(other), k.clone()))?)
+                        })
+                        .collect();
+                    if d.is_empty() {
+                        continue;
+                    }
+                    // The map's order is arbitrary; the test's resampling is seeded, so sort.
+                    d.sort_by(f64::total_cmp);
+                    out.push(PairedRow {
+                        part: part.clone(),
+                        other: policy_column(other),
+                        views,
+                        threshold: threshold_name,
+                        n: d.len(),
+                        margin_points: 100.0 * d.iter().sum::<f64>() / d.len() as f64,
+                        p: paired_sign_flip_p(&d, 20_000, 0xF169),
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+/// `results.csv`: `part,policy,views,n,rate_5mm5deg,rate_2mm2deg`.
+pub fn results_csv(rates: &[RateRow]) -> String {
+    let mut out = String::from("part,policy,views,n,rate_5mm5deg,rate_2mm2deg\n");
+    for r in rates {
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{:.4},{:.4}",
+            r.part, r.policy, r.views, r.n, r.rate_5mm5deg, r.rate_2mm2deg
+        );
+    }
+    out
+}
+
+/// `trials.csv`: one row per trial, policy, draw and step.
+pub fn trials_csv(rows: &[StepRow]) -> String {
+    let mut out = String::from(
+        "part,scene,detection_view,instance,policy,draw,views,view,view_points,err_mm,err_deg,\
+         entropy_nats,predicted_entropy_nats,status,predict_ms,initial_err_mm,initial_err_deg\n",
+    );
+    for r in rows {
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{},{},{:.1},{:.4},{:.4}",
+            r.part,
+            r.scene,
+            r.detection_view,
+            r.instance,
+            r.policy,
+            r.draw,
+            r.views,
+            r.view,
+            r.view_points,
+            r.err_mm,
+            r.err_deg,
+            r.entropy_nats,
+            r.predicted_entropy_nats
+                .map_or(String::new(), |h| format!("{h:.4}")),
+            r.status.replace(',', ";"),
+            r.predict_ms,
+            r.initial_err_mm,
+            r.initial_err_deg
+        );
+    }
+    out
+}
+
+/// `table.md`: the rates at 5 mm/5° and 2 mm/2° per part and view count, one column per
+/// policy, and NBV's paired margins on `all`.
+pub fn table_markdown(
+    rates: &[RateRow],
+    paired: &[PairedRow],
+    policies: &[ViewPolicy],
+    max_views: usize,
+) -> String {
+    let mut out = String::new();
+    let mut parts: Vec<&str> = Vec::new();
+    for r in rates {
+        if !parts.contains(&r.part.as_str()) {
+            parts.push(&r.part);
+        }
+    }
+    let _ = writeln!(
+        out,
+        "Rates within 5 mm/5° · 2 mm/2° (%), n trials per cell (Random: the mean of its draws).\n"
+    );
+    let _ = write!(out, "| part | views | n |");
+    for p in policies {
+        let _ = write!(out, " {} |", policy_column(*p));
+    }
+    let _ = writeln!(out);
+    let _ = write!(out, "|---|---:|---:|");
+    for _ in policies {
+        let _ = write!(out, "---:|");
+    }
+    let _ = writeln!(out);
+    for part in &parts {
+        for views in 1..=max_views {
+            let cells: Vec<Option<&RateRow>> = policies
+                .iter()
+                .map(|p| {
+                    rates.iter().find(|r| {
+                        r.part == *part && r.views == views && r.policy == policy_column(*p)
+                    })
+                })
+                .collect();
+            let Some(n) = cells.iter().flatten().map(|r| r.n).next() else {
+                continue;
+            };
+            let _ = write!(out, "| {part} | {views} | {n} |");
+            for c in &cells {
+                match c {
+                    Some(r) => {
+                        let _ = write!(
+                            out,
+                            " {:.1} · {:.1} |",
+                            100.0 * r.rate_5mm5deg,
+                            100.0 * r.rate_2mm2deg
+                        );
+                    }
+                    None => {
+                        let _ = write!(out, " – |");
+                    }
+                }
+            }
+            let _ = writeln!(out);
+        }
+    }
+    if !paired.is_empty() {
+        let _ = writeln!(
+            out,
+            "\nNBV minus each policy on `all`, percentage points, with the two-sided p of a \
+             paired sign-flip test over the trials (20 000 resamples).\n\n\
+             | other | views | threshold | n | margin | p |\n|---|---:|---|---:|---:|---:|"
+        );
+        for p in paired.iter().filter(|p| p.part == "all") {
+            let _ = writeln!(
+                out,
+                "| {} | {} | {} | {} | {:+.1} | {:.4} |",
+                p.other, p.views, p.threshold, p.n, p.margin_points, p.p
+            );
+        }
+    }
+    out
+}
+
+/// `fig9.png`: per part and `all`, the rate within 5 mm/5° (solid) and 2 mm/2° (dashed)
+/// against views, one colour per policy.
+pub fn fig9_png(
+    rates: &[RateRow],
+    policies: &[ViewPolicy],
+    max_views: usize,
+) -> anyhow::Result<Vec<u8>> {
+    use plotters::prelude::*;
+    let mut parts: Vec<&str> = Vec::new();
+    for r in rates {
+        if !parts.contains(&r.part.as_str()) {
+            parts.push(&r.part);
+        }
+    }
+    let colours = [BLUE, RGBColor(230, 180, 0), RED, GREEN, MAGENTA, CYAN];
+    let columns = 3usize;
+    let rows_n = parts.len().div_ceil(columns).max(1);
+    Ok(glint_plot::png(
+        (360 * columns) as u32,
+        (300 * rows_n) as u32,
+        |root| {
+            let areas = root.split_evenly((rows_n, columns));
+            for (area, part) in areas.iter().zip(&parts) {
+                let mut chart = ChartBuilder::on(area)
+                    .caption(*part, (glint_plot::FONT, 18))
+                    .margin(8)
+                    .x_label_area_size(28)
+                    .y_label_area_size(40)
+                    .build_cartesian_2d(0.8..max_views as f64 + 0.2, 0.0..100.0)?;
+                chart
+                    .configure_mesh()
+                    .x_desc("views")
+                    .y_desc("% correct")
+                    .draw()?;
+                for (policy, colour) in policies.iter().zip(colours.iter().cycle()) {
+                    let name = policy_column(*policy);
+                    let series = |f: &dyn Fn(&RateRow) -> f64| -> Vec<(f64, f64)> {
+                        rates
+                            .iter()
+                            .filter(|r| r.part == *part && r.policy == name)
+                            .map(|r| (r.views as f64, 100.0 * f(r)))
+                            .collect()
+                    };
+                    let c = *colour;
+                    chart
+                        .draw_series(LineSeries::new(
+                            series(&|r| r.rate_5mm5deg),
+                            c.stroke_width(2),
+                        ))?
+                        .label(name)
+                        .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], c));
+                    chart.draw_series(DashedLineSeries::new(
+                        series(&|r| r.rate_2mm2deg),
+                        5,
+                        4,
+                        c.stroke_width(1),
+                    ))?;
+                }
+                if *part == "all" {
+                    chart
+                        .configure_series_labels()
+                        .position(SeriesLabelPosition::LowerRight)
+                        .border_style(BLACK)
+                        .draw()?;
+                }
+            }
+            Ok(())
+        },
+    )?)
+}
+
+/// Writes `results.csv`, `trials.csv`, `paired.csv`, `table.md`, `fig9.png` and `index.html`
+/// to `spec.out`; returns the table.
+pub fn write_outputs(spec: &NbvExperiment, rows: &[StepRow]) -> anyhow::Result<String> {
+    let out = &spec.out;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let rates = rates(rows, &spec.policies, spec.max_views);
+    let paired = paired(rows, &spec.policies, spec.max_views);
+    let table = table_markdown(&rates, &paired, &spec.policies, spec.max_views);
+    let mut paired_csv = String::from("part,other,views,threshold,n,margin_points,p\n");
+    for p in &paired {
+        let _ = writeln!(
+            paired_csv,
+            "{},{},{},{},{},{:.2},{:.5}",
+            p.part, p.other, p.views, p.threshold, p.n, p.margin_points, p.p
+        );
+    }
+    write_file_atomically(&out.join("results.csv"), results_csv(&rates).as_bytes())?;
+    write_file_atomically(&out.join("trials.csv"), trials_csv(rows).as_bytes())?;
+    write_file_atomically(&out.join("paired.csv"), paired_csv.as_bytes())?;
+    write_file_atomically(&out.join("table.md"), table.as_bytes())?;
+    write_file_atomically(
+        &out.join("fig9.png"),
+        &fig9_png(&rates, &spec.policies, spec.max_views)?,
+    )?;
+    let html = format!(
+        "<!doctype html><html><head><meta charset=utf-8><title>Glint: Fig. 9</title></head>\
+         <body style=\"font-family:sans-serif;margin:2em\"><h1>Next-best-view policies (Fig. 9)</h1>\
+         <p>{} bins per part, {} candidates, {} views, {}×{} px, {} spp. Files: \
+         <a href=results.csv>results.csv</a>, <a href=trials.csv>trials.csv</a>, \
+         <a href=paired.csv>paired.csv</a>.</p><img src=fig9.png><pre>{table}</pre></body></html>",
+        spec.scenes,
+        spec.candidates,
+        spec.max_views,
+        spec.resolution.0,
+        spec.resolution.1,
+        spec.spp
+    );
+    write_file_atomically(&out.join("index.html"), html.as_bytes())?;
+    Ok(table)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(policy: &'static str, draw: u32, instance: usize, views: usize, err: f64) -> StepRow {
+        StepRow {
+            part: "gear".into(),
+            scene: 0,
+            detection_view: 0,
+            instance,
+            policy,
+            draw,
+            views,
+            view: 0,
+            view_points: 10,
+            err_mm: err,
+            err_deg: err,
+            entropy_nats: 0.0,
+            predicted_entropy_nats: None,
+            status: "converged".into(),
+            predict_ms: 0.0,
+            initial_err_mm: 10.0,
+            initial_err_deg: 10.0,
+        }
+    }
+
+    #[test]
+    fn random_rates_are_the_mean_of_their_draws_and_every_part_adds_to_all() {
+        // Two trials; NBV right on both at 5/5; Random right on trial 0 in one draw of two.
+        let rows = vec![
+            row("nbv", 0, 0, 1, 1.0),
+            row("nbv", 0, 1, 1, 3.0),
+            row("random", 0, 0, 1, 1.0),
+            row("random", 1, 0, 1, 9.0),
+            row("random", 0, 1, 1, 9.0),
+            row("random", 1, 1, 1, 9.0),
+        ];
+        let policies = [ViewPolicy::Nbv, ViewPolicy::Random];
+        let r = rates(&rows, &policies, 1);
+        let find = |part: &str, policy: &str| {
+            r.iter()
+                .find(|x| x.part == part && x.policy == policy)
+                .unwrap()
+                .clone()
+        };
+        let nbv = find("gear", "nbv");
+        assert_eq!((nbv.n, nbv.rate_5mm5deg, nbv.rate_2mm2deg), (2, 1.0, 0.5));
+        let random = find("all", "random");
+        assert_eq!((random.n, random.rate_5mm5deg), (2, 0.25));
+        let p = paired(&rows, &policies, 1);
+        let at5 = p
+            .iter()
+            .find(|x| x.part == "all" && x.threshold == "5mm5deg")
+            .unwrap();
+        assert_eq!(at5.n, 2);
+        assert!((at5.margin_points - 75.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn detection_views_spread_over_the_candidates() {
+        assert_eq!(detection_views(4, 60), [0, 15, 30, 45]);
+        assert_eq!(detection_views(0, 60), [0]);
+        assert_eq!(detection_views(9, 3), [0, 1, 2]);
+    }
+}
