@@ -99,7 +99,7 @@ async fn garbage_from_one_worker_is_refused_and_its_candidates_go_to_another() {
         candidates: 6,
     })
     .unwrap();
-    let calibration = Calibration::embedded(Part::Zigzag).unwrap().unwrap();
+    let calibration = Calibration::embedded(Part::Zigzag).unwrap();
     let object = prediction_object(&scene, &calibration, false).unwrap();
     let request = PredictionRequest {
         t_w_o: scene.initial_t_w_o,

@@ -28,7 +28,7 @@ fn a_decision_survives_a_worker_killed_mid_way_and_a_returning_worker_is_used_ag
         candidates: 16,
     })
     .unwrap();
-    let calibration = Calibration::embedded(Part::Zigzag).unwrap().unwrap();
+    let calibration = Calibration::embedded(Part::Zigzag).unwrap();
     let object = prediction_object(&scene, &calibration, true).unwrap();
     // Poses as a worker decodes them (the wire's quaternion is re-normalised), so the
     // in-process reference sees the same bits.
@@ -146,7 +146,7 @@ fn a_decision_without_workers_waits_for_one_and_fails_naming_them_when_none_come
         candidates: 4,
     })
     .unwrap();
-    let calibration = Calibration::embedded(Part::Zigzag).unwrap().unwrap();
+    let calibration = Calibration::embedded(Part::Zigzag).unwrap();
     let object = prediction_object(&scene, &calibration, false).unwrap();
     let request = PredictionRequest {
         t_w_o: scene.initial_t_w_o,

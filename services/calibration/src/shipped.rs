@@ -31,18 +31,34 @@ pub enum CalibrationFileError {
     /// the shipped calibration.
     #[error("--material and --response go together")]
     OnlyOne,
-    /// No files were given and no calibration is shipped for this part (the part's display
-    /// name): calibrate it and pass both files.
-    #[error(
-        "rendering the {0} needs its calibrated material and response: only the Zigzag's are \
-         embedded; pass --material and --response (from glint calibrate bsdf and glint \
-         calibrate response)"
-    )]
-    NoneShipped(&'static str),
 }
 
-const ZIGZAG_MATERIAL: &str = include_str!("../../../assets/calibration/zigzag/material.json");
-const ZIGZAG_RESPONSE: &str = include_str!("../../../assets/calibration/zigzag/response.json");
+/// The shipped calibration of `part`: its `material.json` and `response.json` as text.
+fn shipped_text(part: Part) -> (&'static str, &'static str) {
+    macro_rules! shipped {
+        ($dir:literal) => {
+            (
+                include_str!(concat!(
+                    "../../../assets/calibration/",
+                    $dir,
+                    "/material.json"
+                )),
+                include_str!(concat!(
+                    "../../../assets/calibration/",
+                    $dir,
+                    "/response.json"
+                )),
+            )
+        };
+    }
+    match part {
+        Part::EyeBolt => shipped!("eye-bolt"),
+        Part::TubeFitting => shipped!("tube-fitting"),
+        Part::ChromeScrew => shipped!("chrome-screw"),
+        Part::Gear => shipped!("gear"),
+        Part::Zigzag => shipped!("zigzag"),
+    }
+}
 
 impl Calibration {
     /// Reads and validates a material file and a response file.
@@ -62,20 +78,19 @@ impl Calibration {
     ) -> Result<Self, CalibrationFileError> {
         match (material, response) {
             (Some(m), Some(r)) => Self::load(m, r),
-            (None, None) => Self::embedded(part)
-                .ok_or(CalibrationFileError::NoneShipped(part.display_name()))?,
+            (None, None) => Self::embedded(part),
             _ => Err(CalibrationFileError::OnlyOne),
         }
     }
 
-    /// The calibration shipped with Glint for `part`, if there is one: today the Zigzag's.
-    pub fn embedded(part: Part) -> Option<Result<Self, CalibrationFileError>> {
-        (part == Part::Zigzag).then(|| {
-            let origin = Path::new("assets/calibration/zigzag");
-            Ok(Self {
-                material: MaterialFile::parse(ZIGZAG_MATERIAL, &origin.join("material.json"))?,
-                response: ResponseTable::parse(ZIGZAG_RESPONSE, &origin.join("response.json"))?,
-            })
+    /// The calibration shipped with Glint for `part` (`assets/calibration/README.md` says how
+    /// each was made). The files are checked as any other; an error here is a broken build.
+    pub fn embedded(part: Part) -> Result<Self, CalibrationFileError> {
+        let (material, response) = shipped_text(part);
+        let origin = Path::new("assets/calibration").join(part.name());
+        Ok(Self {
+            material: MaterialFile::parse(material, &origin.join("material.json"))?,
+            response: ResponseTable::parse(response, &origin.join("response.json"))?,
         })
     }
 }
@@ -85,12 +100,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_zigzag_calibration_is_shipped_and_others_say_how_to_get_one() {
-        let zigzag = Calibration::embedded(Part::Zigzag).unwrap().unwrap();
-        assert!(zigzag.material.radiometric_scale().is_some());
-        assert!(Calibration::embedded(Part::Gear).is_none());
-        let e = Calibration::from_files_or_embedded(Part::Gear, None, None).unwrap_err();
-        assert!(e.to_string().contains("--material and --response"), "{e}");
+    fn every_part_has_a_valid_shipped_calibration_and_files_go_in_pairs() {
+        for part in Part::ALL {
+            let shipped = Calibration::embedded(part).unwrap();
+            assert!(shipped.material.radiometric_scale().is_some(), "{part}");
+            assert!(shipped.material.params().is_ok(), "{part}");
+        }
         let e = Calibration::from_files_or_embedded(Part::Zigzag, Some(Path::new("m")), None)
             .unwrap_err();
         assert!(matches!(e, CalibrationFileError::OnlyOne));

@@ -594,7 +594,7 @@ mod tests {
     fn the_nbv_policy_takes_the_candidate_of_least_predicted_entropy() {
         use glint_orchestrator::local::LocalPrediction;
         let scene = small_scene();
-        let calibration = Calibration::embedded(Part::Zigzag).unwrap().unwrap();
+        let calibration = Calibration::embedded(Part::Zigzag).unwrap();
         let object = prediction_object(&scene, &calibration, false).unwrap();
         let estimation = LocalEstimation::default();
         let workers = LocalPrediction::default();
@@ -630,7 +630,7 @@ mod tests {
     #[test]
     fn prediction_maps_are_written_as_exr_and_png() {
         let scene = small_scene();
-        let calibration = Calibration::embedded(Part::Zigzag).unwrap().unwrap();
+        let calibration = Calibration::embedded(Part::Zigzag).unwrap();
         let object = prediction_object(&scene, &calibration, true).unwrap();
         let sdf = glint_orchestrator::local::SdfCache::with_config(
             glint_uncertainty::predict::prediction_grid_config(),

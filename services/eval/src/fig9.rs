@@ -344,11 +344,12 @@ fn refine_run(
     }
 }
 
-/// Runs the experiment; `on_scene` is told after each bin (part name, bin, trials). Returns
-/// every step of every run.
+/// Runs the experiment; `on_scene` is told after each bin (part name, bin, its trials, every
+/// step so far — so a caller can write what is done before a long run ends). Returns every
+/// step of every run.
 pub fn run(
     spec: &NbvExperiment,
-    mut on_scene: impl FnMut(&str, u32, usize),
+    mut on_scene: impl FnMut(&str, u32, usize, &[StepRow]) -> anyhow::Result<()>,
 ) -> anyhow::Result<Vec<StepRow>> {
     anyhow::ensure!(!spec.objects.is_empty(), "parts: at least one");
     anyhow::ensure!(!spec.policies.is_empty(), "policies: at least one");
@@ -541,7 +542,7 @@ pub fn run(
                     });
                 }
             }
-            on_scene(&object.name, s, trials.len());
+            on_scene(&object.name, s, trials.len(), &rows)?;
         }
     }
     Ok(rows)

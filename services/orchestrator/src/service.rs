@@ -244,15 +244,6 @@ impl Orchestrator {
                             ))
                         })?;
                     let shipped = glint_calibration::shipped::Calibration::embedded(part)
-                        .ok_or_else(|| {
-                            StageError::FailedPrecondition(format!(
-                                "policy {} renders the part, and Glint ships no calibration for \
-                                 the {}: send its material, response and radiometric_scale \
-                                 (glint calibrate bsdf, glint calibrate response)",
-                                config.policy.name(),
-                                part.display_name()
-                            ))
-                        })?
                         .map_err(|e| StageError::Internal(e.to_string()))?;
                     PartCalibration::from_files(&shipped)?
                 }

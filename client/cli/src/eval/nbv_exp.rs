@@ -172,7 +172,7 @@ pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
     );
     let started = std::time::Instant::now();
     let bar = glint_eval::progress::bar(u64::from(spec.scenes) * spec.objects.len() as u64, "bins");
-    let rows = glint_eval::fig9::run(&spec, |part, scene, trials| {
+    let rows = glint_eval::fig9::run(&spec, |part, scene, trials, so_far| {
         bar.suspend(|| {
             println!(
                 "  {part} bin {scene}: {trials} trials ({:.0} s so far)",
@@ -180,6 +180,8 @@ pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
             )
         });
         bar.inc(1);
+        // What is done is on disk before the next bin starts.
+        glint_eval::fig9::write_outputs(&spec, so_far).map(|_| ())
     })?;
     bar.finish_and_clear();
     let table = glint_eval::fig9::write_outputs(&spec, &rows)?;
