@@ -297,22 +297,16 @@ fn eval_refine_runs_on_a_user_mesh() {
     assert!(!never.exists());
 }
 
-#[test]
-fn eval_nbv_rejects_bad_arguments_before_writing() {
+/// `glint eval COMMAND --out DIR` with each case's flags exits 1 or 2 with an error holding
+/// the case's needle, no panic, and writes nothing; the calibration cases every
+/// multi-part experiment shares are added.
+fn rejects_before_writing(command: &str, cases: &[(Vec<&str>, &str)]) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("never");
     let missing = dir.path().join("missing.json");
     let missing = missing.to_str().unwrap();
-    for (extra, needle) in [
-        (
-            vec!["--parts", "zigzag", "--min-visib-fract", "2"],
-            "--min-visib-fract",
-        ),
+    let calibration_cases = [
         (vec!["--parts", "gear,spanner"], "spanner"),
-        (
-            vec!["--parts", "zigzag", "--max-views", "9", "--candidates", "4"],
-            "max_views",
-        ),
         (
             vec![
                 "--parts",
@@ -335,18 +329,36 @@ fn eval_nbv_rejects_bad_arguments_before_writing() {
             ],
             "missing.json",
         ),
-    ] {
-        let mut args = vec!["eval", "nbv", "--out", out.to_str().unwrap()];
+    ];
+    for (extra, needle) in cases.iter().chain(&calibration_cases) {
+        let mut args = vec!["eval", command, "--out", out.to_str().unwrap()];
         args.extend(extra.iter().copied());
         let o = glint(&args);
         let err = text(&o);
-        assert_eq!(o.status.code(), Some(1), "{extra:?}: {err}");
+        assert!(matches!(o.status.code(), Some(1 | 2)), "{extra:?}: {err}");
         assert!(
             err.contains(needle) && !err.contains("panicked"),
             "{extra:?}: {err}"
         );
         assert!(!out.exists(), "{extra:?} left output behind");
     }
+}
+
+#[test]
+fn eval_nbv_rejects_bad_arguments_before_writing() {
+    rejects_before_writing(
+        "nbv",
+        &[
+            (
+                vec!["--parts", "zigzag", "--min-visib-fract", "2"],
+                "--min-visib-fract",
+            ),
+            (
+                vec!["--parts", "zigzag", "--max-views", "9", "--candidates", "4"],
+                "max_views",
+            ),
+        ],
+    );
 }
 
 #[test]
@@ -443,5 +455,79 @@ fn eval_nbv_writes_rates_that_follow_from_its_trials() {
             (f[4].parse::<f64>().unwrap() - expected).abs() < 1e-4,
             "{line}"
         );
+    }
+}
+
+#[test]
+fn eval_prediction_rejects_bad_arguments_before_writing() {
+    rejects_before_writing(
+        "prediction",
+        &[
+            (vec!["--good-depth-mm=-1"], "--good-depth-mm"),
+            (vec!["--candidates", "1"], "--candidates"),
+        ],
+    );
+}
+
+#[test]
+fn eval_prediction_ranks_every_candidate_of_every_bin() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("prediction");
+    let o = glint(&[
+        "eval",
+        "prediction",
+        "--parts",
+        "zigzag",
+        "--scenes",
+        "2",
+        "--candidates",
+        "3",
+        "--instances",
+        "3",
+        "--resolution",
+        "320x256",
+        "--spp",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let csv = std::fs::read_to_string(out.join("prediction.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "part,scene,view,iou_missing,spearman_sigma,logdet_ratio,predicted_rank,oracle_rank"
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 6, "{csv}");
+    for scene in ["0", "1"] {
+        for column in [6, 7] {
+            let mut ranks: Vec<&str> = rows
+                .iter()
+                .filter(|r| r[1] == scene)
+                .map(|r| r[column])
+                .collect();
+            ranks.sort_unstable();
+            assert_eq!(
+                ranks,
+                ["1", "2", "3"],
+                "bin {scene}, column {column}: {csv}"
+            );
+        }
+    }
+    for r in &rows {
+        let iou: f64 = r[3].parse().unwrap();
+        assert!(iou.is_nan() || (0.0..=1.0).contains(&iou), "{r:?}");
+        assert!(r[5].parse::<f64>().unwrap().is_finite(), "{r:?}");
+    }
+    let summary = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+    let parts: Vec<&str> = summary
+        .lines()
+        .skip(1)
+        .map(|l| &l[..l.find(',').unwrap()])
+        .collect();
+    assert_eq!(parts, ["zigzag", "all"]);
+    for file in ["summary.md", "fig8_zigzag.png", "index.html"] {
+        assert!(out.join(file).is_file(), "{file}");
     }
 }

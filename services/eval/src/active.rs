@@ -3,8 +3,6 @@
 //! against the truth. Evaluation code: it reads ground truth to place the detector's guess and
 //! to score the steps; the session itself (in `glint-orchestrator`) never sees it.
 
-use std::sync::Arc;
-
 use anyhow::Context;
 use glint_camera::setup::{BinSetup, BinSetupSpec};
 use glint_camera::visibility::instance_visibility;
@@ -101,11 +99,7 @@ pub fn set_up(spec: &ActiveSceneSpec) -> anyhow::Result<ActiveScene> {
     let (target, target_visib_fract, initial_t_w_o) =
         (guess.target, guess.visib_fract, guess.initial_t_w_o);
     let gt_t_w_o = setup.poses[target];
-    let object = SessionObject {
-        name: spec.part.name().to_string(),
-        mesh_sha256_hex: mesh.content_sha256_hex(),
-        mesh: Arc::new(mesh),
-    };
+    let object = SessionObject::new(spec.part.name(), mesh);
     Ok(ActiveScene {
         camera: MockCamera { setup },
         object,

@@ -24,11 +24,10 @@
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Context;
-use glint_camera::setup::{BinSetup, BinSetupSpec, capture_seed};
+use glint_camera::setup::capture_seed;
 use glint_camera::visibility::instance_visibility;
 use glint_estimation::depth_alignment::{DepthAlignmentConfig, align_depth_along};
 use glint_estimation::nbv::{
@@ -43,7 +42,7 @@ use glint_geometry::sdf::SdfGrid;
 use glint_orchestrator::local::{LocalPrediction, MockCamera};
 use glint_orchestrator::session::{CONST_SIGMA_Z_M, ViewPolicy};
 use glint_orchestrator::stages::{
-    CameraStage, PredictionObject, PredictionRequest, PredictionStage, SessionObject,
+    CameraStage, PredictionObject, PredictionRequest, PredictionStage,
 };
 use nalgebra::{Isometry3, Matrix6};
 use rand::SeedableRng;
@@ -52,7 +51,7 @@ use rayon::prelude::*;
 use crate::active::{Calibration, prediction_object_for};
 use crate::initial_pose::InitialPoseNoise;
 use crate::metrics::paired_sign_flip_p;
-use crate::scenes::{EvalObject, SceneSpec, capture_config};
+use crate::scenes::{EvalObject, MockCameraSpec, bin_seed, mock_bin};
 
 /// A part of the experiment with its calibration (what the render workers know of it).
 #[derive(Clone, Debug)]
@@ -83,14 +82,8 @@ pub struct NbvExperiment {
     /// Base seed: bin `s` has seed `seed·10⁴ + 8000 + s` (apart from Table I's evaluation and
     /// tuning bins); it also seeds the detector's guesses and the random draws.
     pub seed: u64,
-    /// Camera resolution, px.
-    pub resolution: (u32, u32),
-    /// Samples per pixel of the mock camera's renders.
-    pub spp: u32,
-    /// Patterns the mock camera projects per view.
-    pub shots: u32,
-    /// The mock camera's matching window radius, px.
-    pub window_radius_px: u32,
+    /// The mock camera.
+    pub camera: MockCameraSpec,
     /// The policies compared.
     pub policies: Vec<ViewPolicy>,
     /// Draws of the Random policy per trial (its rates are their mean).
@@ -360,19 +353,9 @@ pub fn run(
         spec.candidates
     );
     anyhow::ensure!(spec.random_draws >= 1, "random_draws: at least one");
-    let rig =
-        glint_render::rig::SliRig::ensenso_n35().resized(spec.resolution.0, spec.resolution.1)?;
-    let scene_spec = SceneSpec {
-        matcher: String::new(),
-        window_radius_px: spec.window_radius_px,
-        shots: spec.shots,
-        instances: spec.instances,
-        views: spec.candidates as u32,
-        width_px: spec.resolution.0,
-        height_px: spec.resolution.1,
-        spp: spec.spp,
-    };
-    let config = capture_config(&rig, &scene_spec).context("the camera's settings")?;
+    spec.camera
+        .rig_and_config()
+        .context("the camera's settings")?;
     let refine_config = SdfRefineConfig::default();
     let prior = PosePrior::default();
     let noise = InitialPoseNoise::default();
@@ -381,31 +364,17 @@ pub fn run(
         let object = &part.object;
         let grid = SdfGrid::build(&object.mesh, &refine_grid_config())
             .with_context(|| format!("SDF of {}", object.name))?;
-        let session_object = SessionObject {
-            name: object.name.clone(),
-            mesh_sha256_hex: object.mesh.content_sha256_hex(),
-            mesh: Arc::new(object.mesh.clone()),
-        };
+        let session_object = object.session_object();
         for s in 0..spec.scenes {
-            let scene_seed = spec
-                .seed
-                .wrapping_mul(10_000)
-                .wrapping_add(8000 + u64::from(s));
-            let mut setup = BinSetup::new(
-                &object.mesh,
-                object.material,
-                &BinSetupSpec {
-                    instances: spec.instances,
-                    seed: scene_seed,
-                    width_px: spec.resolution.0,
-                    height_px: spec.resolution.1,
-                    samples_per_pixel: spec.spp,
-                },
+            let scene_seed = bin_seed(spec.seed, 8000, s);
+            let (camera, candidates) = mock_bin(
+                object,
+                spec.instances,
+                scene_seed,
+                spec.candidates,
+                &spec.camera,
             )
             .with_context(|| format!("{} bin {s}", object.name))?;
-            setup.config = config.clone();
-            let candidates = setup.views(spec.candidates);
-            let camera = MockCamera { setup };
             let prediction = (
                 LocalPrediction::default(),
                 prediction_object_for(
@@ -496,7 +465,7 @@ pub fn run(
                             &camera,
                             &candidates[v],
                             capture_seed(scene_seed, v),
-                            spec.window_radius_px,
+                            spec.camera.window_radius_px,
                         )?);
                     }
                 }
@@ -926,15 +895,10 @@ pub fn write_outputs(spec: &NbvExperiment, rows: &[StepRow]) -> anyhow::Result<S
     let html = format!(
         "<!doctype html><html><head><meta charset=utf-8><title>Glint: Fig. 9</title></head>\
          <body style=\"font-family:sans-serif;margin:2em\"><h1>Next-best-view policies (Fig. 9)</h1>\
-         <p>{} bins per part, {} candidates, {} views, {}×{} px, {} spp. Files: \
+         <p>{} bins per part, {} candidates, {} views, {}. Files: \
          <a href=results.csv>results.csv</a>, <a href=trials.csv>trials.csv</a>, \
          <a href=paired.csv>paired.csv</a>.</p><img src=fig9.png><pre>{table}</pre></body></html>",
-        spec.scenes,
-        spec.candidates,
-        spec.max_views,
-        spec.resolution.0,
-        spec.resolution.1,
-        spec.spp
+        spec.scenes, spec.candidates, spec.max_views, spec.camera
     );
     write_file_atomically(&out.join("index.html"), html.as_bytes())?;
     Ok(table)

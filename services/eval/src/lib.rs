@@ -16,6 +16,10 @@
 //! - [`policies`]: the view policies compared over whole sessions (the demo's loop);
 //! - [`fig9`]: Fig. 9 as the paper measures it: every policy chooses every view among the
 //!   same candidates, from the same detector guesses, on shared captures;
+//! - [`thresholds`]: τ_I and τ_σ (eq 16–17) chosen on tuning seeds, by how well the predicted
+//!   missing pixels match the capture's lost ones;
+//! - [`prediction`]: is the prediction right — every candidate's predicted missing mask,
+//!   σ̌_z and Fisher information against the mock camera's capture from that view;
 //! - [`progress`]: progress bars for long runs.
 //!
 //! Evaluation code reads ground truth (to draw initial poses and to score); nothing that
@@ -37,3 +41,4 @@ pub mod prediction;
 pub mod progress;
 pub mod scenes;
 pub mod table1;
+pub mod thresholds;

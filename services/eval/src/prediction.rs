@@ -1,233 +1,689 @@
-//! How well the render workers predict which depth pixels a view will lose (eq 16–17), and
-//! the thresholds τ_I and τ_σ chosen by it: on each bin and view, the predictor — given the
-//! true pose and the calibrated material, so that only its missing-pixel model is judged — is
-//! compared pixel by pixel with the mock camera's real capture on the visible pixels of every
-//! instance. A pixel is *usable* in the capture when it has depth within `good_depth_m` of the
-//! true surface (wrong depth is as lost as missing depth); *predicted usable* when the worker
-//! keeps it. The score is the balanced accuracy ½(TPR + TNR) of "usable", so a threshold that
-//! keeps everything (or nothing) scores ½.
+//! Is the prediction right? For every candidate view of a bin, the render workers' prediction
+//! (eq 14–17 → the 6×6 Fisher information of eq 21–22) against what the mock camera then
+//! captures from that view:
+//!
+//! - **IoU of the missing masks** over the instance's visible pixels: predicted missing is
+//!   any pixel the worker drops (ratio test, σ test, not seen by the right camera); captured
+//!   missing is a pixel with no depth or depth further than `good_depth_m` from the true
+//!   surface (wrong depth is as lost as none). Both empty counts as agreement, 1;
+//! - **Spearman ρ of σ̌_z against the capture's σ_z** (eq 1–5 on the captured pattern images,
+//!   the refiner's σ) on the pixels both keep;
+//! - **log-det ratio** `ln |F_pred + P| − ln |F_capt + P|` (nats), with `F_capt` the
+//!   information of the captured points (the instance's visible mask eroded by the window,
+//!   as Fig. 9 segments) and `P` the planner's prior — 0 when the prediction has the
+//!   capture's information; twice the entropy the prediction gets wrong;
+//! - **ranks**: each candidate's rank by predicted and by captured entropy (1 = most
+//!   informative); the captured ("oracle") rank of the predicted best view says what
+//!   planning on predictions loses.
+//!
+//! Both sides are judged at the true pose, so that the rendering model alone is measured
+//! (Fig. 9 measures it from the detector's pose); the predictor still knows only the
+//! calibrated material and response — or, as the evaluation-only control
+//! `true_materials`, the simulator's true material, to show what calibration error costs.
+//! The instance judged in each bin is the one most visible from the first candidate.
 
 use std::fmt::Write as _;
+use std::path::PathBuf;
 
-use glint_camera::setup::{BinSetup, BinSetupSpec};
+use anyhow::Context;
+use glint_calibration::material_file::MaterialFile;
+use glint_camera::setup::capture_seed;
 use glint_camera::visibility::instance_visibility;
-use glint_geometry::Part;
-use glint_orchestrator::local::SdfCache;
-use glint_orchestrator::stages::SessionObject;
-use glint_uncertainty::predict::PixelCause;
-use glint_uncertainty::{PredictionSettings, predict_candidate};
-use std::sync::Arc;
+use glint_estimation::nbv::{PosePrior, pose_entropy_nats};
+use glint_estimation::refine::information_of_points;
+use glint_estimation::view::{SigmaSource, ViewSigma, points_in_mask, view_sigma};
+use glint_geometry::image::Image;
+use glint_geometry::io::write_file_atomically;
+use glint_geometry::sdf::SdfGrid;
+use glint_uncertainty::predict::{PredictionImages, prediction_grid_config};
+use glint_uncertainty::{PixelCause, PredictionSettings, candidate_seed, predict_candidate};
+use rayon::prelude::*;
 
-use crate::active::{Calibration, prediction_object_for};
-use glint_orchestrator::local::MockCamera;
+use crate::active::{MISSING_RGB, prediction_object_for};
+use crate::fig9::NbvObject;
+use crate::metrics::spearman;
+use crate::scenes::{MockCameraSpec, bin_seed, mock_bin};
 
-/// What to measure.
+/// The settings of one study (`glint eval prediction`'s flags).
 #[derive(Clone, Debug)]
-pub struct PredictionStudy {
-    /// The part dropped into every bin.
-    pub part: Part,
-    /// One bin per seed (the seed of its drop).
-    pub seeds: Vec<u64>,
-    /// Views per bin, on the cap above it; each is captured and predicted.
-    pub views: usize,
+pub struct PredictionExperiment {
+    /// The parts, each with its calibration.
+    pub objects: Vec<NbvObject>,
+    /// Bins per part: bin `s` has seed `seed·10⁴ + 9000 + s` (apart from Fig. 9's and the
+    /// threshold tuning's bins).
+    pub scenes: u32,
+    /// Candidate views on the cap above each bin; every one is predicted and captured.
+    pub candidates: usize,
     /// Parts per bin.
     pub instances: u32,
-    /// Width of the mock camera's images, px.
-    pub width_px: u32,
-    /// Height of the mock camera's images, px.
-    pub height_px: u32,
-    /// Samples per pixel of the mock camera's renders.
-    pub samples_per_pixel: u32,
-    /// Instances with fewer visible pixels are skipped.
-    pub min_visible_px: u64,
-    /// Capture depth within this of the true surface is usable, metres.
+    /// Base seed.
+    pub seed: u64,
+    /// The mock camera.
+    pub camera: MockCameraSpec,
+    /// Evaluation-only control: predict with the simulator's true material instead of the
+    /// fitted one (the response and radiometric scale stay the calibrated ones).
+    pub true_materials: bool,
+    /// The render workers render the bin with the part (beyond the paper).
+    pub predict_with_bin: bool,
+    /// Captured depth within this of the true surface is usable, metres.
     pub good_depth_m: f64,
-    /// The τ_I tried (eq 16): missing where `I_single / I_multi` is below it.
-    pub tau_intensity_ratios: Vec<f64>,
-    /// The τ_σ tried (eq 17), metres: missing where σ̌_z is above it.
-    pub tau_sigmas_m: Vec<f64>,
-    /// Render the bin with the part.
-    pub with_bin: bool,
+    /// Output directory.
+    pub out: PathBuf,
 }
 
-/// Pixel counts of one threshold pair, summed over everything measured.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Confusion {
-    /// τ_I of eq 16.
-    pub tau_intensity_ratio: f64,
-    /// τ_σ of eq 17, metres.
-    pub tau_sigma_m: f64,
-    /// Usable in the capture and kept by the prediction.
-    pub true_usable: u64,
-    /// Lost in the capture but kept by the prediction.
-    pub false_usable: u64,
-    /// Lost in the capture and dropped by the prediction.
-    pub true_missing: u64,
-    /// Usable in the capture but dropped by the prediction.
-    pub false_missing: u64,
-}
-
-impl Confusion {
-    /// ½ (TPR + TNR) of "usable".
-    pub fn balanced_accuracy(&self) -> f64 {
-        let usable = (self.true_usable + self.false_missing) as f64;
-        let missing = (self.true_missing + self.false_usable) as f64;
-        let tpr = if usable > 0.0 {
-            self.true_usable as f64 / usable
+impl PredictionExperiment {
+    /// Which materials the predictor knows, for reports.
+    pub fn materials_label(&self) -> &'static str {
+        if self.true_materials {
+            "true (evaluation-only control)"
         } else {
-            1.0
-        };
-        let tnr = if missing > 0.0 {
-            self.true_missing as f64 / missing
-        } else {
-            1.0
-        };
-        0.5 * (tpr + tnr)
-    }
-
-    /// Share of the pixels the capture had usable, and the prediction kept.
-    pub fn rates(&self) -> (f64, f64) {
-        let all = (self.true_usable + self.false_usable + self.true_missing + self.false_missing)
-            .max(1) as f64;
-        (
-            (self.true_usable + self.false_missing) as f64 / all,
-            (self.true_usable + self.false_usable) as f64 / all,
-        )
-    }
-}
-
-/// Runs the study: one [`Confusion`] per (τ_I, τ_σ), in the order of the grid (τ_I outer).
-pub fn run(
-    study: &PredictionStudy,
-    calibration: &Calibration,
-    mut on_view: impl FnMut(),
-) -> anyhow::Result<Vec<Confusion>> {
-    anyhow::ensure!(!study.seeds.is_empty(), "seeds: at least one");
-    anyhow::ensure!(
-        !study.tau_intensity_ratios.is_empty() && !study.tau_sigmas_m.is_empty(),
-        "thresholds: at least one of each"
-    );
-    let mesh = study.part.mesh();
-    let object = SessionObject {
-        name: study.part.name().into(),
-        mesh_sha256_hex: mesh.content_sha256_hex(),
-        mesh: Arc::new(mesh),
-    };
-    let sdf = SdfCache::with_config(glint_uncertainty::predict::prediction_grid_config())
-        .grid(&object)
-        .map_err(anyhow::Error::msg)?;
-    let mut grid: Vec<Confusion> = study
-        .tau_intensity_ratios
-        .iter()
-        .flat_map(|&ti| {
-            study.tau_sigmas_m.iter().map(move |&ts| Confusion {
-                tau_intensity_ratio: ti,
-                tau_sigma_m: ts,
-                ..Confusion::default()
-            })
-        })
-        .collect();
-    for &seed in &study.seeds {
-        let setup = BinSetup::new(
-            &object.mesh,
-            glint_camera::materials::ground_truth(study.part),
-            &BinSetupSpec {
-                instances: study.instances,
-                seed,
-                width_px: study.width_px,
-                height_px: study.height_px,
-                samples_per_pixel: study.samples_per_pixel,
-            },
-        )?;
-        let mock = MockCamera { setup };
-        let setup = &mock.setup;
-        let camera = setup.camera();
-        let views = setup.views(study.views);
-        let calibrated =
-            prediction_object_for(&mock, &views[0], &object, calibration, study.with_bin)?;
-        let predictor = calibrated.predictor(sdf.clone());
-        for (k, t_w_c) in views.iter().enumerate() {
-            let view_seed = glint_camera::setup::capture_seed(seed, k);
-            let rendered = camera.render_shots(t_w_c, view_seed);
-            let (capture, _) = camera.capture_rendered(t_w_c, &rendered, view_seed)?;
-            let truth = &rendered.truth;
-            let [left, _] = setup.rig.cameras(t_w_c);
-            let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
-            for vis in instance_visibility(&setup.scene, &left, &labels) {
-                if vis.px_count_visib < study.min_visible_px {
-                    continue;
-                }
-                let t_w_o = setup.poses[(vis.label - 1) as usize];
-                for ti_index in 0..study.tau_intensity_ratios.len() {
-                    let settings = PredictionSettings {
-                        tau_intensity_ratio: study.tau_intensity_ratios[ti_index],
-                        // σ judged below, for every τ_σ at once.
-                        tau_sigma_m: 1.0,
-                        samples_per_pixel: 2,
-                        shots: setup.config.shots,
-                        window_radius_px: setup.config.matcher.window_radius_px,
-                        with_maps: true,
-                        ..PredictionSettings::default()
-                    };
-                    let p = predict_candidate(&predictor, &t_w_o, t_w_c, &settings, view_seed)?;
-                    let (Some(crop), Some(cause), Some(sigma)) = (p.crop, &p.cause, &p.sigma_z_m)
-                    else {
-                        continue;
-                    };
-                    for v in 0..crop.height {
-                        for u in 0..crop.width {
-                            let (fu, fv) = (u + crop.u_min, v + crop.v_min);
-                            if truth.label.get(fu, fv) != Some(vis.label) {
-                                continue; // judged on the instance's visible pixels only
-                            }
-                            let z_true = truth.depth_m.get(fu, fv).unwrap_or(f32::NAN);
-                            let usable = capture
-                                .depth
-                                .get(fu, fv)
-                                .is_some_and(|z| ((z - z_true).abs() as f64) <= study.good_depth_m);
-                            let c = cause.get(u, v).unwrap_or(PixelCause::NotPart as u8);
-                            let s = sigma.get(u, v).unwrap_or(f32::NAN) as f64;
-                            for ts_index in 0..study.tau_sigmas_m.len() {
-                                let kept = c == PixelCause::Kept as u8
-                                    && s.is_finite()
-                                    && s <= study.tau_sigmas_m[ts_index];
-                                let cell =
-                                    &mut grid[ti_index * study.tau_sigmas_m.len() + ts_index];
-                                match (usable, kept) {
-                                    (true, true) => cell.true_usable += 1,
-                                    (true, false) => cell.false_missing += 1,
-                                    (false, false) => cell.true_missing += 1,
-                                    (false, true) => cell.false_usable += 1,
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-            on_view();
+            "fitted"
         }
     }
-    Ok(grid)
 }
 
-/// The grid as a table, best first.
-pub fn grid_markdown(grid: &[Confusion]) -> String {
-    let mut sorted = grid.to_vec();
-    sorted.sort_by(|a, b| b.balanced_accuracy().total_cmp(&a.balanced_accuracy()));
-    let mut out = String::from(
-        "| τ_I | τ_σ (mm) | balanced accuracy | usable in capture | kept by prediction |\n|---:|---:|---:|---:|---:|\n",
+/// One candidate's comparison (a row of `prediction.csv`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CandidateRow {
+    /// The part's name.
+    pub part: String,
+    /// The bin.
+    pub scene: u32,
+    /// The candidate's index.
+    pub view: usize,
+    /// The judged instance's visible pixels in the capture's truth.
+    pub visible_px: usize,
+    /// IoU of the predicted and captured missing masks (NaN when fewer than
+    /// [`MIN_JUDGED_PX`] pixels are visible).
+    pub iou_missing: f64,
+    /// Spearman ρ of σ̌_z against the captured σ_z on the pixels both keep (NaN under
+    /// [`MIN_JUDGED_PX`] of them).
+    pub spearman_sigma: f64,
+    /// `ln |F_pred + P| − ln |F_capt + P|`, nats.
+    pub logdet_ratio: f64,
+    /// Rank by predicted entropy, 1 = lowest.
+    pub predicted_rank: usize,
+    /// Rank by the captured points' entropy, 1 = lowest.
+    pub oracle_rank: usize,
+    /// Entropy of the prior plus the predicted information, nats (eq 20).
+    pub predicted_entropy_nats: f64,
+    /// Entropy of the prior plus the captured information, nats.
+    pub captured_entropy_nats: f64,
+}
+
+/// Fewer visible (or commonly kept) pixels than this leave the IoU (or ρ) unjudged.
+pub const MIN_JUDGED_PX: usize = 50;
+
+/// The pixel-level comparison of one candidate.
+struct PixelScores {
+    visible_px: usize,
+    iou_missing: f64,
+    spearman_sigma: f64,
+}
+
+/// Compares the prediction's crop maps with the capture on the pixels the truth gives to
+/// `label`. `sigma_captured` is the capture's σ_z (full image), `usable(u, v)` whether the
+/// capture's depth there is within tolerance of the truth.
+fn pixel_scores(
+    crop: &glint_geometry::image::PixelRect,
+    cause: &Image<u8>,
+    sigma_predicted: &Image<f32>,
+    sigma_captured: &Image<f32>,
+    on_instance: impl Fn(u32, u32) -> bool,
+    usable: impl Fn(u32, u32) -> bool,
+) -> PixelScores {
+    let (mut visible, mut both_missing, mut either_missing) = (0usize, 0usize, 0usize);
+    let (mut predicted, mut captured) = (Vec::new(), Vec::new());
+    for v in 0..crop.height {
+        for u in 0..crop.width {
+            let (fu, fv) = (u + crop.u_min, v + crop.v_min);
+            if !on_instance(fu, fv) {
+                continue;
+            }
+            visible += 1;
+            let predicted_missing = cause.get(u, v) != Some(PixelCause::Kept as u8);
+            let captured_missing = !usable(fu, fv);
+            both_missing += usize::from(predicted_missing && captured_missing);
+            either_missing += usize::from(predicted_missing || captured_missing);
+            if !predicted_missing && !captured_missing {
+                let (p, c) = (
+                    sigma_predicted.get(u, v).unwrap_or(f32::NAN),
+                    sigma_captured.get(fu, fv).unwrap_or(f32::NAN),
+                );
+                if p.is_finite() && c.is_finite() {
+                    predicted.push(f64::from(p));
+                    captured.push(f64::from(c));
+                }
+            }
+        }
+    }
+    PixelScores {
+        visible_px: visible,
+        iou_missing: if visible < MIN_JUDGED_PX {
+            f64::NAN
+        } else if either_missing == 0 {
+            1.0
+        } else {
+            both_missing as f64 / either_missing as f64
+        },
+        spearman_sigma: if predicted.len() < MIN_JUDGED_PX {
+            f64::NAN
+        } else {
+            spearman(&predicted, &captured)
+        },
+    }
+}
+
+/// Ranks 1..n of `values`, lowest first (ties by index).
+fn ranks(values: &[f64]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..values.len()).collect();
+    order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
+    let mut rank = vec![0; values.len()];
+    for (r, &i) in order.iter().enumerate() {
+        rank[i] = r + 1;
+    }
+    rank
+}
+
+/// The Fig. 8 panels of one view: what the study keeps of a prediction to draw it.
+pub struct Fig8View {
+    /// The part's name.
+    pub part: String,
+    /// The candidate drawn.
+    pub view: usize,
+    /// The prediction's images (left camera, DN).
+    pub images: PredictionImages,
+    /// σ̌_z over the crop, metres.
+    pub sigma_z_m: Image<f32>,
+    /// [`PixelCause`] over the crop.
+    pub cause: Image<u8>,
+    /// The σ̌_z at the top of the colour ramp (τ_σ), metres.
+    pub scale_max_m: f64,
+}
+
+/// Runs the study; `on_scene` is told after each bin. Returns every candidate's row and, per
+/// part, the Fig. 8 panels of the first bin's predicted best view.
+pub fn run(
+    spec: &PredictionExperiment,
+    mut on_scene: impl FnMut(&str, u32),
+) -> anyhow::Result<(Vec<CandidateRow>, Vec<Fig8View>)> {
+    anyhow::ensure!(!spec.objects.is_empty(), "parts: at least one");
+    anyhow::ensure!(spec.scenes >= 1, "scenes: at least one bin");
+    anyhow::ensure!(spec.candidates >= 2, "candidates: at least two to rank");
+    anyhow::ensure!(
+        spec.good_depth_m.is_finite() && spec.good_depth_m > 0.0,
+        "good_depth: a positive distance"
     );
-    for c in &sorted {
-        let (usable, kept) = c.rates();
+    spec.camera
+        .rig_and_config()
+        .context("the camera's settings")?;
+    let prior = PosePrior::default();
+    let mut rows = Vec::new();
+    let mut fig8 = Vec::new();
+    for part in &spec.objects {
+        let object = &part.object;
+        let session_object = object.session_object();
+        let grid = std::sync::Arc::new(
+            SdfGrid::build(&object.mesh, &prediction_grid_config())
+                .with_context(|| format!("SDF of {}", object.name))?,
+        );
+        let mut calibration = part.calibration.clone();
+        if spec.true_materials {
+            calibration.material =
+                MaterialFile::new(&object.material, calibration.material.provenance.clone());
+        }
+        for s in 0..spec.scenes {
+            let scene_seed = bin_seed(spec.seed, 9000, s);
+            let (camera, candidates) = mock_bin(
+                object,
+                spec.instances,
+                scene_seed,
+                spec.candidates,
+                &spec.camera,
+            )
+            .with_context(|| format!("{} bin {s}", object.name))?;
+            let setup = &camera.setup;
+            let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
+            let [left0, _] = setup.rig.cameras(&candidates[0]);
+            let Some(judged) = instance_visibility(&setup.scene, &left0, &labels)
+                .into_iter()
+                .max_by_key(|v| v.px_count_visib)
+            else {
+                continue;
+            };
+            let label = judged.label;
+            let gt_t_w_o = setup.poses[usize::from(label - 1)];
+            let predictor = prediction_object_for(
+                &camera,
+                &candidates[0],
+                &session_object,
+                &calibration,
+                spec.predict_with_bin,
+            )?;
+            let settings = PredictionSettings {
+                shots: predictor.shots,
+                pattern_fill: predictor.pattern_fill,
+                window_radius_px: predictor.window_radius_px,
+                with_maps: true,
+                ..PredictionSettings::default()
+            };
+            let predictor = predictor.predictor(grid.clone());
+            let predictions = candidates
+                .par_iter()
+                .enumerate()
+                .map(|(k, t_w_c)| {
+                    predict_candidate(
+                        &predictor,
+                        &gt_t_w_o,
+                        t_w_c,
+                        &settings,
+                        candidate_seed(spec.seed, k as u32),
+                    )
+                    .map_err(|e| anyhow::anyhow!("predicting view {k}: {e}"))
+                })
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            let mut scene_rows = Vec::new();
+            let mut entropies = (Vec::new(), Vec::new());
+            for (k, (t_w_c, predicted)) in candidates.iter().zip(&predictions).enumerate() {
+                let (captured, truth) = camera
+                    .capture_with_truth(t_w_c, capture_seed(scene_seed, k))
+                    .map_err(|e| anyhow::anyhow!("capturing view {k}: {e}"))?;
+                let view = &captured.measurement;
+                let sigma = view_sigma(
+                    view,
+                    &SigmaSource::PatternImages {
+                        window_radius_px: spec.camera.window_radius_px,
+                        noise: None,
+                    },
+                )?;
+                let on_instance = |u: u32, v: u32| truth.label.get(u, v) == Some(label);
+                let mask = truth.label.map(|l| l == label);
+                let points =
+                    points_in_mask(view, &mask, &sigma, spec.camera.window_radius_px)?.points;
+                let captured_information = information_of_points(
+                    &grid,
+                    &points,
+                    &gt_t_w_o.inverse(),
+                    settings.model_sigma_m,
+                );
+                let h_pred = pose_entropy_nats(&predicted.information, &prior)?;
+                let h_capt = pose_entropy_nats(&captured_information, &prior)?;
+                let usable = |u: u32, v: u32| {
+                    let z_true = truth.depth_m.get(u, v).unwrap_or(f32::NAN);
+                    view.depth
+                        .depth_m
+                        .get(u, v)
+                        .is_some_and(|z| f64::from((z - z_true).abs()) <= spec.good_depth_m)
+                };
+                let scores = match (&predicted.crop, &predicted.cause, &predicted.sigma_z_m) {
+                    (Some(crop), Some(cause), Some(sigma_z)) => {
+                        let captured_sigma = match &sigma {
+                            ViewSigma::PerPixel(image) => image.clone(),
+                            ViewSigma::Constant(c) => truth.label.map(|_| *c as f32),
+                        };
+                        pixel_scores(crop, cause, sigma_z, &captured_sigma, on_instance, usable)
+                    }
+                    _ => PixelScores {
+                        visible_px: truth.label.data().iter().filter(|&&l| l == label).count(),
+                        iou_missing: f64::NAN,
+                        spearman_sigma: f64::NAN,
+                    },
+                };
+                entropies.0.push(h_pred);
+                entropies.1.push(h_capt);
+                scene_rows.push(CandidateRow {
+                    part: object.name.clone(),
+                    scene: s,
+                    view: k,
+                    visible_px: scores.visible_px,
+                    iou_missing: scores.iou_missing,
+                    spearman_sigma: scores.spearman_sigma,
+                    // Entropy is −½ ln |F + P| plus a constant (eq 20).
+                    logdet_ratio: 2.0 * (h_capt - h_pred),
+                    predicted_rank: 0,
+                    oracle_rank: 0,
+                    predicted_entropy_nats: h_pred,
+                    captured_entropy_nats: h_capt,
+                });
+            }
+            let (predicted_ranks, oracle_ranks) = (ranks(&entropies.0), ranks(&entropies.1));
+            for (row, (p, o)) in scene_rows
+                .iter_mut()
+                .zip(predicted_ranks.iter().zip(&oracle_ranks))
+            {
+                row.predicted_rank = *p;
+                row.oracle_rank = *o;
+            }
+            if s == 0 {
+                let best = predicted_ranks.iter().position(|&r| r == 1).unwrap_or(0);
+                let p = &predictions[best];
+                if let (Some(images), Some(sigma_z_m), Some(cause)) =
+                    (&p.images, &p.sigma_z_m, &p.cause)
+                {
+                    fig8.push(Fig8View {
+                        part: object.name.clone(),
+                        view: best,
+                        images: images.clone(),
+                        sigma_z_m: sigma_z_m.clone(),
+                        cause: cause.clone(),
+                        scale_max_m: settings.tau_sigma_m,
+                    });
+                }
+            }
+            rows.extend(scene_rows);
+            on_scene(&object.name, s);
+        }
+    }
+    Ok((rows, fig8))
+}
+
+/// One line of `summary.csv`: a part, or `all`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SummaryRow {
+    /// The part's name, or `all`.
+    pub part: String,
+    /// Candidates compared.
+    pub candidates: usize,
+    /// Mean IoU of the missing masks over the judged candidates.
+    pub mean_iou_missing: f64,
+    /// Mean Spearman ρ of σ̌_z against the captured σ_z over the judged candidates.
+    pub mean_spearman_sigma: f64,
+    /// Median log-det ratio, nats.
+    pub median_logdet_ratio: f64,
+    /// Mean oracle rank of each bin's predicted best view (1 is perfect).
+    pub best_oracle_rank: f64,
+    /// Mean over bins of Spearman ρ between predicted and captured entropy.
+    pub rank_spearman: f64,
+}
+
+fn mean_finite(values: impl Iterator<Item = f64>) -> f64 {
+    let v: Vec<f64> = values.filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+/// Per part (in order of appearance) and `all`.
+pub fn summary(rows: &[CandidateRow]) -> Vec<SummaryRow> {
+    let mut parts: Vec<&str> = Vec::new();
+    for r in rows {
+        if !parts.contains(&r.part.as_str()) {
+            parts.push(&r.part);
+        }
+    }
+    let of = |name: &str, rows: Vec<&CandidateRow>| {
+        let mut logdet: Vec<f64> = rows.iter().map(|r| r.logdet_ratio).collect();
+        logdet.sort_by(f64::total_cmp);
+        let mut bins: Vec<(&str, u32)> = rows.iter().map(|r| (r.part.as_str(), r.scene)).collect();
+        bins.dedup();
+        let in_bin = |b: &(&str, u32)| {
+            rows.iter()
+                .filter(|r| (r.part.as_str(), r.scene) == *b)
+                .collect::<Vec<_>>()
+        };
+        SummaryRow {
+            part: name.into(),
+            candidates: rows.len(),
+            mean_iou_missing: mean_finite(rows.iter().map(|r| r.iou_missing)),
+            mean_spearman_sigma: mean_finite(rows.iter().map(|r| r.spearman_sigma)),
+            median_logdet_ratio: logdet.get(logdet.len() / 2).copied().unwrap_or(f64::NAN),
+            best_oracle_rank: mean_finite(bins.iter().filter_map(|b| {
+                in_bin(b)
+                    .iter()
+                    .find(|r| r.predicted_rank == 1)
+                    .map(|r| r.oracle_rank as f64)
+            })),
+            rank_spearman: mean_finite(bins.iter().map(|b| {
+                let bin = in_bin(b);
+                let p: Vec<f64> = bin.iter().map(|r| r.predicted_entropy_nats).collect();
+                let c: Vec<f64> = bin.iter().map(|r| r.captured_entropy_nats).collect();
+                spearman(&p, &c)
+            })),
+        }
+    };
+    let mut out: Vec<SummaryRow> = parts
+        .iter()
+        .map(|p| of(p, rows.iter().filter(|r| r.part == *p).collect()))
+        .collect();
+    out.push(of("all", rows.iter().collect()));
+    out
+}
+
+/// `prediction.csv`: one row per candidate.
+pub fn prediction_csv(rows: &[CandidateRow]) -> String {
+    let mut out = String::from(
+        "part,scene,view,iou_missing,spearman_sigma,logdet_ratio,predicted_rank,oracle_rank\n",
+    );
+    for r in rows {
         let _ = writeln!(
             out,
-            "| {:.2} | {:.2} | {:.3} | {:.1} % | {:.1} % |",
-            c.tau_intensity_ratio,
-            c.tau_sigma_m * 1e3,
-            c.balanced_accuracy(),
-            100.0 * usable,
-            100.0 * kept
+            "{},{},{},{:.4},{:.4},{:.4},{},{}",
+            r.part,
+            r.scene,
+            r.view,
+            r.iou_missing,
+            r.spearman_sigma,
+            r.logdet_ratio,
+            r.predicted_rank,
+            r.oracle_rank
         );
     }
     out
+}
+
+/// `summary.csv`.
+pub fn summary_csv(summary: &[SummaryRow]) -> String {
+    let mut out = String::from(
+        "part,candidates,mean_iou_missing,mean_spearman_sigma,median_logdet_ratio,\
+         best_oracle_rank,rank_spearman\n",
+    );
+    for s in summary {
+        let _ = writeln!(
+            out,
+            "{},{},{:.4},{:.4},{:.4},{:.2},{:.4}",
+            s.part,
+            s.candidates,
+            s.mean_iou_missing,
+            s.mean_spearman_sigma,
+            s.median_logdet_ratio,
+            s.best_oracle_rank,
+            s.rank_spearman
+        );
+    }
+    out
+}
+
+/// The summary as a Markdown table.
+pub fn summary_markdown(summary: &[SummaryRow], candidates: usize) -> String {
+    let mut out = format!(
+        "| part | candidates | IoU missing | ρ(σ̌_z, σ_z) | median log-det ratio (nats) | \
+         oracle rank of predicted best (of {candidates}) | ρ(predicted, captured entropy) |\n\
+         |---|---:|---:|---:|---:|---:|---:|\n"
+    );
+    for s in summary {
+        let _ = writeln!(
+            out,
+            "| {} | {} | {:.3} | {:.3} | {:+.2} | {:.1} | {:.3} |",
+            s.part,
+            s.candidates,
+            s.mean_iou_missing,
+            s.mean_spearman_sigma,
+            s.median_logdet_ratio,
+            s.best_oracle_rank,
+            s.rank_spearman
+        );
+    }
+    out
+}
+
+/// Fig. 8 for one view: single-path, multi-path, the first synthesised pattern image (grey,
+/// 0 to the brightest DN of the three) and σ̌_z (colour ramp to τ_σ, missing pixels by cause
+/// in [`MISSING_RGB`]), side by side with 4 px gaps, magnified when the crop is small.
+pub fn fig8_png(view: &Fig8View) -> anyhow::Result<Vec<u8>> {
+    let (w, h) = (view.sigma_z_m.width(), view.sigma_z_m.height());
+    let grey = [
+        &view.images.single_path_dn,
+        &view.images.multi_path_dn,
+        &view.images.pattern_dn,
+    ];
+    for image in grey {
+        anyhow::ensure!(
+            (image.width(), image.height()) == (w, h),
+            "the prediction's images differ in size"
+        );
+    }
+    let top = grey
+        .iter()
+        .flat_map(|i| i.data().iter().copied())
+        .filter(|v| v.is_finite())
+        .fold(1.0f32, f32::max);
+    const GAP: u32 = 4;
+    // Small crops are magnified (nearest pixel) to at least 240 px high.
+    let zoom = (240 / h.max(1)).max(1);
+    let (zw, zh) = (w * zoom, h * zoom);
+    let width = 4 * zw + 3 * GAP;
+    let mut rgb = vec![255u8; (width * zh * 3) as usize];
+    for y in 0..zh {
+        let v = y / zoom;
+        for x in 0..zw {
+            let u = x / zoom;
+            let mut put = |panel: u32, colour: [u8; 3]| {
+                let i = ((y * width + panel * (zw + GAP) + x) * 3) as usize;
+                rgb[i..i + 3].copy_from_slice(&colour);
+            };
+            for (panel, image) in grey.iter().enumerate() {
+                let g = (image.get(u, v).unwrap_or(0.0) / top * 255.0).clamp(0.0, 255.0) as u8;
+                put(panel as u32, [g, g, g]);
+            }
+            let c = view.cause.get(u, v).unwrap_or(PixelCause::NotPart as u8);
+            let colour = MISSING_RGB
+                .iter()
+                .find(|(k, _)| *k as u8 == c)
+                .map(|(_, rgb)| *rgb)
+                .unwrap_or_else(|| {
+                    let s = f64::from(view.sigma_z_m.get(u, v).unwrap_or(f32::NAN));
+                    glint_plot::ramp_rgb(s / view.scale_max_m)
+                });
+            put(3, colour);
+        }
+    }
+    Ok(glint_plot::encode_rgb_png(&rgb, width, zh)?)
+}
+
+/// Writes `prediction.csv`, `summary.csv`, `summary.md`, `fig8_<part>.png` and `index.html` to
+/// `spec.out`; returns the summary table.
+pub fn write_outputs(
+    spec: &PredictionExperiment,
+    rows: &[CandidateRow],
+    fig8: &[Fig8View],
+) -> anyhow::Result<String> {
+    let out = &spec.out;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let summary = summary(rows);
+    let table = summary_markdown(&summary, spec.candidates);
+    write_file_atomically(&out.join("prediction.csv"), prediction_csv(rows).as_bytes())?;
+    write_file_atomically(&out.join("summary.csv"), summary_csv(&summary).as_bytes())?;
+    write_file_atomically(&out.join("summary.md"), table.as_bytes())?;
+    let mut figures = String::new();
+    for view in fig8 {
+        let name = format!("fig8_{}.png", view.part);
+        write_file_atomically(&out.join(&name), &fig8_png(view)?)?;
+        let _ = write!(
+            figures,
+            "<h2>{} (view {})</h2><img src={name}>",
+            view.part, view.view
+        );
+    }
+    let html = format!(
+        "<!doctype html><html><head><meta charset=utf-8><title>Glint: is the prediction right?\
+         </title></head><body style=\"font-family:sans-serif;margin:2em\"><h1>Predicted against \
+         captured, per candidate</h1><p>{} bins per part, {} candidates, {}, {} materials. \
+         Files: <a href=prediction.csv>prediction.csv</a>, <a href=summary.csv>summary.csv</a>.</p><pre>{table}</pre><p>Fig. 8, each part's \
+         predicted best view of its first bin: single-path, multi-path, synthesised pattern, \
+         σ̌_z (red: ratio test, magenta: σ test, orange: not seen by the right camera).</p>\
+         {figures}</body></html>",
+        spec.scenes,
+        spec.candidates,
+        spec.camera,
+        spec.materials_label()
+    );
+    write_file_atomically(&out.join("index.html"), html.as_bytes())?;
+    Ok(table)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glint_geometry::image::PixelRect;
+
+    #[test]
+    fn missing_masks_are_compared_on_the_instance_only() {
+        // A 10×10 crop at (5, 5) of a 20×20 image; the instance covers the crop's left 8
+        // columns. Predicted missing: columns 0–1; captured missing: columns 1–2.
+        fn image<T: Copy>(w: u32, h: u32, f: impl Fn(u32, u32) -> T) -> Image<T> {
+            let data = (0..w * h).map(|i| f(i % w, i / w)).collect();
+            Image::new(w, h, data).unwrap()
+        }
+        let crop = PixelRect::new(5, 5, 10, 10);
+        let cause = image(10, 10, |u, _| {
+            if u < 2 {
+                PixelCause::Ratio as u8
+            } else {
+                PixelCause::Kept as u8
+            }
+        });
+        // The capture's σ_z is the prediction's doubled, at the crop's offset.
+        let sigma_predicted = image(10, 10, |u, v| (u + 10 * v) as f32);
+        let sigma_captured = image(20, 20, |u, v| (u + 10 * v) as f32 * 2.0);
+        let on = |u: u32, _| (5..13).contains(&u);
+        let usable = |u: u32, _| !(6..8).contains(&u);
+        let s = pixel_scores(&crop, &cause, &sigma_predicted, &sigma_captured, on, usable);
+        assert_eq!(s.visible_px, 80);
+        // Both missing: column 1 (10 px); either: columns 0–2 (30 px).
+        assert!(
+            (s.iou_missing - 10.0 / 30.0).abs() < 1e-12,
+            "{}",
+            s.iou_missing
+        );
+        // Kept by both: columns 3–7, σ monotone in each other: ρ = 1.
+        assert!((s.spearman_sigma - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn ranks_and_the_summary_follow_from_the_rows() {
+        assert_eq!(ranks(&[0.3, -1.0, 2.0, 0.0]), vec![3, 1, 4, 2]);
+        let row = |view, h_pred: f64, h_capt: f64, p, o| CandidateRow {
+            part: "gear".into(),
+            scene: 0,
+            view,
+            visible_px: 100,
+            iou_missing: 0.5,
+            // Unjudged on view 0: the mean is over the judged ones.
+            spearman_sigma: if view == 0 { f64::NAN } else { 0.3 },
+            logdet_ratio: 2.0 * (h_capt - h_pred),
+            predicted_rank: p,
+            oracle_rank: o,
+            predicted_entropy_nats: h_pred,
+            captured_entropy_nats: h_capt,
+        };
+        // The predicted best (view 1) is second by the capture.
+        let rows = vec![row(0, -30.0, -31.0, 2, 1), row(1, -32.0, -30.5, 1, 2)];
+        let s = summary(&rows);
+        assert_eq!(s.len(), 2);
+        // One part: `all` is that part under another name.
+        assert_eq!(
+            s[1],
+            SummaryRow {
+                part: "all".into(),
+                ..s[0].clone()
+            }
+        );
+        assert_eq!(s[0].best_oracle_rank, 2.0);
+        assert_eq!(s[0].mean_spearman_sigma, 0.3);
+        assert_eq!(s[0].rank_spearman, -1.0);
+        // Median of {−2, 3}: the upper one.
+        assert_eq!(s[0].median_logdet_ratio, 3.0);
+    }
 }

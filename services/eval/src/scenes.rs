@@ -20,6 +20,8 @@ use glint_geometry::image::{Image, normalised_intensity};
 use glint_geometry::io::read_mesh;
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::{LengthUnit, Part, Symmetry, TriMesh};
+use glint_orchestrator::local::MockCamera;
+use glint_orchestrator::stages::SessionObject;
 use glint_render::bsdf::PrincipledParams;
 use glint_render::rig::SliRig;
 use nalgebra::Isometry3;
@@ -36,6 +38,46 @@ pub struct EvalObject {
     pub symmetry: Symmetry,
     /// The ground-truth material the mock camera renders the object with.
     pub material: PrincipledParams<f32>,
+}
+
+impl EvalObject {
+    /// The part as a session knows it: its name and mesh (never its material or poses).
+    pub fn session_object(&self) -> SessionObject {
+        SessionObject::new(self.name.clone(), self.mesh.clone())
+    }
+}
+
+/// The seed of bin `s` of an experiment with base seed `seed`: `seed·10⁴ + family + s`, where
+/// each experiment has its own `family` (Fig. 9 8000, the prediction study 9000) so that no
+/// two share bins and none meets the tuning seeds.
+pub fn bin_seed(seed: u64, family: u64, s: u32) -> u64 {
+    seed.wrapping_mul(10_000)
+        .wrapping_add(family + u64::from(s))
+}
+
+/// A mock bin of `instances` copies of `object` dropped with `seed`, seen by `camera`, and
+/// `views` candidate views on the cap above it.
+pub fn mock_bin(
+    object: &EvalObject,
+    instances: u32,
+    seed: u64,
+    views: usize,
+    camera: &MockCameraSpec,
+) -> anyhow::Result<(MockCamera, Vec<Isometry3<f64>>)> {
+    let mut setup = BinSetup::new(
+        &object.mesh,
+        object.material,
+        &BinSetupSpec {
+            instances,
+            seed,
+            width_px: camera.resolution.0,
+            height_px: camera.resolution.1,
+            samples_per_pixel: camera.spp,
+        },
+    )?;
+    setup.config = camera.rig_and_config()?.1;
+    let candidates = setup.views(views);
+    Ok((MockCamera { setup }, candidates))
 }
 
 /// The objects of an experiment: `parts` (painted with their true materials, or with the matte
@@ -143,21 +185,61 @@ pub fn ensure_scene(
     Ok(scene_dir)
 }
 
-/// The mock camera's settings for `spec`.
-pub fn capture_config(rig: &SliRig, spec: &SceneSpec) -> anyhow::Result<CaptureConfig> {
-    let mut config = CaptureConfig {
-        samples_per_pixel: spec.spp,
-        ..CaptureConfig::for_rig_and_shots(rig, spec.shots)?
-    };
-    let r = spec.window_radius_px;
-    config.matcher.window_radius_px = r;
-    // The edge pass re-matches with a smaller window; keep it smaller than the main one.
-    config.matcher.edge_windows = config.matcher.edge_windows.filter(|_| r > 1).map(|mut e| {
-        e.window_radius_px = e.window_radius_px.min(r - 1);
-        e
-    });
-    config.matcher.validate()?;
-    Ok(config)
+/// The mock camera of an experiment: the Ensenso N35 rig at `resolution`, rendering with
+/// `spp` samples per pixel, projecting `shots` patterns, matching `window_radius_px` windows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MockCameraSpec {
+    /// Image size (width, height), px.
+    pub resolution: (u32, u32),
+    /// Samples per pixel of the renders.
+    pub spp: u32,
+    /// Patterns projected per view.
+    pub shots: u32,
+    /// The stereo matcher's window radius, px.
+    pub window_radius_px: u32,
+}
+
+impl MockCameraSpec {
+    /// The rig and the capture settings; the error names what is out of range.
+    pub fn rig_and_config(&self) -> anyhow::Result<(SliRig, CaptureConfig)> {
+        let rig = SliRig::ensenso_n35().resized(self.resolution.0, self.resolution.1)?;
+        let mut config = CaptureConfig {
+            samples_per_pixel: self.spp,
+            ..CaptureConfig::for_rig_and_shots(&rig, self.shots)?
+        };
+        let r = self.window_radius_px;
+        config.matcher.window_radius_px = r;
+        // The edge pass re-matches with a smaller window; keep it smaller than the main one.
+        config.matcher.edge_windows = config.matcher.edge_windows.filter(|_| r > 1).map(|mut e| {
+            e.window_radius_px = e.window_radius_px.min(r - 1);
+            e
+        });
+        config.matcher.validate()?;
+        Ok((rig, config))
+    }
+}
+
+impl std::fmt::Display for MockCameraSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let side = 2 * self.window_radius_px + 1;
+        write!(
+            f,
+            "{}×{} px, {} spp, {} shots, {side}×{side} windows",
+            self.resolution.0, self.resolution.1, self.spp, self.shots
+        )
+    }
+}
+
+impl SceneSpec {
+    /// The camera the scenes are captured with.
+    pub fn camera(&self) -> MockCameraSpec {
+        MockCameraSpec {
+            resolution: (self.width_px, self.height_px),
+            spp: self.spp,
+            shots: self.shots,
+            window_radius_px: self.window_radius_px,
+        }
+    }
 }
 
 fn generate(
@@ -180,7 +262,7 @@ fn generate(
     )?;
     let rig = setup.rig;
     let camera = MockSliCamera {
-        config: capture_config(&rig, spec)?,
+        config: spec.camera().rig_and_config()?.1,
         ..setup.camera()
     };
     let view_poses = setup.views(spec.views as usize);

@@ -31,8 +31,7 @@ use rand::seq::IndexedRandom;
 use crate::initial_pose::InitialPoseNoise;
 use crate::metrics::{chi2_mean_band, mcnemar_exact_p, mean, median, nees};
 use crate::scenes::{
-    EvalObject, LoadedScene, OBJ_ID, SceneSpec, capture_config, ensure_scene, eval_objects,
-    load_scene,
+    EvalObject, LoadedScene, OBJ_ID, SceneSpec, ensure_scene, eval_objects, load_scene,
 };
 
 /// The settings of one Table I run (`glint eval refine`'s flags).
@@ -477,8 +476,6 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
         &args.symmetry,
         args.matte,
     )?;
-    let rig =
-        glint_render::rig::SliRig::ensenso_n35().resized(args.resolution.0, args.resolution.1)?;
     let window_radius_px = args.window_radius_px;
     let mut spec = SceneSpec {
         matcher: String::new(),
@@ -492,8 +489,10 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
     };
     spec.matcher = format!(
         "{:?}",
-        capture_config(&rig, &spec)
+        spec.camera()
+            .rig_and_config()
             .context("--window-radius-px")?
+            .1
             .matcher
     );
     std::fs::create_dir_all(&args.out)

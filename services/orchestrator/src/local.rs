@@ -5,6 +5,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use glint_camera::capture::CaptureTruth;
 use glint_camera::setup::BinSetup;
 use glint_estimation::multiview::{self, MultiviewError};
 use glint_estimation::nbv::{NbvError, PosePrior, plan_next_view, pose_entropy_nats};
@@ -28,6 +29,37 @@ pub struct MockCamera {
     /// The simulated bin, rig and capture settings (its part poses are the truth no session
     /// reads).
     pub setup: BinSetup,
+}
+
+impl MockCamera {
+    /// [`CameraStage::capture`] and, for evaluations only, what the simulator knows of it
+    /// (each left pixel's true depth and instance label).
+    pub fn capture_with_truth(
+        &self,
+        t_w_c: &Isometry3<f64>,
+        seed: u64,
+    ) -> Result<(CapturedView, CaptureTruth), StageError> {
+        let started = Instant::now();
+        let camera = self.setup.camera();
+        let (capture, noise_shots, truth) = camera
+            .capture_with_noise_shots(t_w_c, seed, true)
+            .map_err(|e| StageError::Internal(format!("capture: {e}")))?;
+        let left = capture.shot_images(0).into_iter().cloned().collect();
+        let right = capture.shot_images(1).into_iter().cloned().collect();
+        let view = CapturedView {
+            measurement: ViewMeasurement {
+                t_w_c: *t_w_c,
+                stereo: self.setup.rig.stereo,
+                depth: capture.depth,
+                left,
+                right,
+                noise_shots,
+                max_dn: camera.config.sensor.max_dn(),
+            },
+            capture_ms: started.elapsed().as_secs_f64() * 1e3,
+        };
+        Ok((view, truth))
+    }
 }
 
 impl CameraStage for MockCamera {
@@ -55,25 +87,7 @@ impl CameraStage for MockCamera {
     }
 
     fn capture(&self, t_w_c: &Isometry3<f64>, seed: u64) -> Result<CapturedView, StageError> {
-        let started = Instant::now();
-        let camera = self.setup.camera();
-        let (capture, noise_shots, _truth) = camera
-            .capture_with_noise_shots(t_w_c, seed, true)
-            .map_err(|e| StageError::Internal(format!("capture: {e}")))?;
-        let left = capture.shot_images(0).into_iter().cloned().collect();
-        let right = capture.shot_images(1).into_iter().cloned().collect();
-        Ok(CapturedView {
-            measurement: ViewMeasurement {
-                t_w_c: *t_w_c,
-                stereo: self.setup.rig.stereo,
-                depth: capture.depth,
-                left,
-                right,
-                noise_shots,
-                max_dn: camera.config.sensor.max_dn(),
-            },
-            capture_ms: started.elapsed().as_secs_f64() * 1e3,
-        })
+        self.capture_with_truth(t_w_c, seed).map(|(view, _)| view)
     }
 }
 

@@ -198,11 +198,7 @@ impl Orchestrator {
             PartSource::Builtin(part) => (part.name().to_owned(), part.mesh()),
             PartSource::Mesh { name, mesh } => (name, mesh),
         };
-        let object = SessionObject {
-            mesh_sha256_hex: mesh.content_sha256_hex(),
-            name,
-            mesh: Arc::new(mesh),
-        };
+        let object = SessionObject::new(name, mesh);
         let candidates = match request.candidates {
             Ok(list) => list,
             Err(count) => {

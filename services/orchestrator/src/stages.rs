@@ -81,6 +81,17 @@ pub struct SessionObject {
     pub mesh_sha256_hex: String,
 }
 
+impl SessionObject {
+    /// The part `name` with `mesh` (metres, object frame), keyed by the mesh's hash.
+    pub fn new(name: impl Into<String>, mesh: TriMesh) -> Self {
+        Self {
+            name: name.into(),
+            mesh_sha256_hex: mesh.content_sha256_hex(),
+            mesh: Arc::new(mesh),
+        }
+    }
+}
+
 /// What a camera tells about itself.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CameraInfo {

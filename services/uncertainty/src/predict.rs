@@ -220,12 +220,27 @@ pub struct CandidatePrediction {
     pub sigma_z_m: Option<Image<f32>>,
     /// [`PixelCause`] per crop pixel, when asked.
     pub cause: Option<Image<u8>>,
+    /// The left camera's images the prediction came from (the paper's Fig. 8), when maps are
+    /// asked for and σ̌_z is rendered.
+    pub images: Option<PredictionImages>,
     /// Wall time of the scene build and the white renders, milliseconds.
     pub render_ms: f64,
     /// Wall time of the missing-pixel tests and σ̌_z (eq 16–17, 1–5), milliseconds.
     pub sigma_ms: f64,
     /// Wall time of the Fisher information (eq 21–22), milliseconds.
     pub information_ms: f64,
+}
+
+/// The left camera's intermediate images of one prediction over its crop, in DN through the
+/// calibrated response g (eq 13): what the paper's Fig. 8 shows.
+#[derive(Clone, Debug)]
+pub struct PredictionImages {
+    /// White-pattern single-path (direct only) image (eq 14).
+    pub single_path_dn: Image<f32>,
+    /// White-pattern multi-path (direct + inter-reflected) image (eq 15).
+    pub multi_path_dn: Image<f32>,
+    /// The first synthesised random-pattern image (step 3 of the module).
+    pub pattern_dn: Image<f32>,
 }
 
 impl CandidatePrediction {
@@ -237,6 +252,7 @@ impl CandidatePrediction {
             crop: None,
             sigma_z_m: None,
             cause: None,
+            images: None,
             render_ms: 0.0,
             sigma_ms: 0.0,
             information_ms: 0.0,
@@ -616,6 +632,7 @@ pub fn predict_candidate(
     }
 
     let started = Instant::now();
+    let mut images = None;
     let sigma_image = match settings.sigma {
         SigmaModel::Constant { sigma_z_m } => depth_left.map(|z| {
             if z.is_finite() {
@@ -666,6 +683,14 @@ pub fn predict_candidate(
                 &patterns,
                 settings.pattern_fill,
             )?;
+            if settings.with_maps {
+                let dn = |radiance: &Image<f32>| radiance.map(|e| object.camera.intensity(e));
+                images = left.first().map(|pattern| PredictionImages {
+                    single_path_dn: dn(single_l),
+                    multi_path_dn: dn(multi_l),
+                    pattern_dn: pattern.clone(),
+                });
+            }
             depth_sigma_shifted(
                 &left,
                 &right,
@@ -735,6 +760,7 @@ pub fn predict_candidate(
         crop: Some(crop),
         sigma_z_m,
         cause,
+        images,
         render_ms,
         sigma_ms,
         information_ms,

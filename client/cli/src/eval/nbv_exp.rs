@@ -3,10 +3,8 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
-use glint_eval::active::Calibration;
-use glint_eval::fig9::{NbvExperiment, NbvObject};
-use glint_geometry::{LengthUnit, Part, Symmetry};
+use glint_eval::fig9::NbvExperiment;
+use glint_geometry::{LengthUnit, Symmetry};
 use glint_orchestrator::session::ViewPolicy;
 
 #[derive(clap::Args)]
@@ -57,50 +55,16 @@ pub struct NbvArgs {
     /// visible (Table I's 0.8).
     #[arg(long, default_value_t = 0.8)]
     pub min_visib_fract: f64,
-    /// Camera resolution, WIDTHxHEIGHT.
-    #[arg(long, default_value = "1280x1024", value_parser = crate::capture_cmd::parse_resolution)]
-    pub resolution: (u32, u32),
-    /// Samples per pixel of the mock camera's renders.
-    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=1024))]
-    pub spp: u32,
-    /// Patterns the mock camera projects per view.
-    #[arg(long, default_value_t = glint_camera::capture::DEFAULT_SHOTS, value_parser = clap::value_parser!(u32).range(1..=64))]
-    pub shots: u32,
-    /// The mock camera's matching window radius, px (default: the camera's for --shots).
-    #[arg(long)]
-    pub window_radius_px: Option<u32>,
-    /// Each part's calibration is read from DIR/<part>/material.json and response.json (the
-    /// layout `glint demo` caches in glint-out/calibration); a part without one there uses the
-    /// calibration shipped with Glint (assets/calibration/).
-    #[arg(long)]
-    pub calibrations: Option<PathBuf>,
-    /// The fitted material of --mesh, or of the one part given (`glint calibrate bsdf`).
-    #[arg(long, requires = "response")]
-    pub material: Option<PathBuf>,
-    /// The camera response that goes with --material (`glint calibrate response`).
-    #[arg(long, requires = "material")]
-    pub response: Option<PathBuf>,
+    #[command(flatten)]
+    pub camera: super::MockCameraArgs,
+    // With --mesh, --material and --response are its calibration.
+    #[command(flatten)]
+    pub calibration: crate::calibration_args::PartCalibrationArgs,
     /// The render workers render the bin with the part (beyond the paper).
     #[arg(long)]
     pub predict_bin: bool,
     #[arg(long)]
     pub out: PathBuf,
-}
-
-/// A part's calibration: `--material/--response`, else `DIR/<part>/` of `--calibrations`,
-/// else the one shipped.
-fn calibration_of(args: &NbvArgs, part: Part) -> anyhow::Result<Calibration> {
-    if let (Some(m), Some(r)) = (&args.material, &args.response) {
-        return Ok(Calibration::load(m, r)?);
-    }
-    if let Some(root) = &args.calibrations {
-        let dir = root.join(part.name());
-        let (m, r) = (dir.join("material.json"), dir.join("response.json"));
-        if m.is_file() && r.is_file() {
-            return Ok(Calibration::load(&m, &r)?);
-        }
-    }
-    Ok(Calibration::from_files_or_embedded(part, None, None)?)
 }
 
 pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
@@ -111,12 +75,6 @@ pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
         );
     }
     let parts = super::parse_parts(&args.parts)?;
-    if args.material.is_some() && args.mesh.is_none() && parts.len() != 1 {
-        anyhow::bail!(
-            "--material and --response calibrate one part: give one --parts, or use \
-             --calibrations DIR for several"
-        );
-    }
     let objects = glint_eval::scenes::eval_objects(
         &parts,
         args.mesh.as_deref(),
@@ -124,18 +82,8 @@ pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
         &args.symmetry,
         false,
     )?;
-    let mut with_calibration = Vec::new();
-    for (i, object) in objects.into_iter().enumerate() {
-        let calibration = match &args.mesh {
-            Some(_) => calibration_of(args, Part::TubeFitting)?,
-            None => calibration_of(args, parts[i])
-                .with_context(|| format!("the {}'s calibration", parts[i].display_name()))?,
-        };
-        with_calibration.push(NbvObject {
-            object,
-            calibration,
-        });
-    }
+    let with_calibration =
+        super::calibrated_objects(objects, &parts, &args.calibration, args.mesh.is_some())?;
     let spec = NbvExperiment {
         objects: with_calibration,
         scenes: args.scenes,
@@ -144,12 +92,7 @@ pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
         candidates: args.candidates as usize,
         instances: args.instances,
         seed: args.seed,
-        resolution: args.resolution,
-        spp: args.spp,
-        shots: args.shots,
-        window_radius_px: args
-            .window_radius_px
-            .unwrap_or_else(|| glint_camera::capture::default_window_radius_px(args.shots)),
+        camera: args.camera.spec(),
         policies: args.policies.clone(),
         random_draws: args.random_draws,
         min_visib_fract: args.min_visib_fract,
@@ -158,7 +101,7 @@ pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
     };
     println!(
         "Fig. 9 on mock data: {} part(s) × {} bins × {} detection views, {} policies, {} views \
-         of {} candidates, {}×{} px, {} spp. Initial poses from the stand-in detector; errors \
+         of {} candidates, {}. Initial poses from the stand-in detector; errors \
          against the truth.",
         spec.objects.len(),
         spec.scenes,
@@ -166,9 +109,7 @@ pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
         spec.policies.len(),
         spec.max_views,
         spec.candidates,
-        spec.resolution.0,
-        spec.resolution.1,
-        spec.spp
+        spec.camera
     );
     let started = std::time::Instant::now();
     let bar = glint_eval::progress::bar(u64::from(spec.scenes) * spec.objects.len() as u64, "bins");

@@ -1,41 +1,40 @@
-//! `glint eval prediction`: how well the render workers predict the pixels a view loses
-//! (eq 16–17), over a grid of τ_I and τ_σ (`glint_eval::prediction`). Run it on tuning seeds
-//! to choose the thresholds, then with the chosen pair on evaluation seeds.
+//! `glint eval prediction`: is the prediction right? Every candidate's predicted missing
+//! pixels, σ̌_z and Fisher information against the mock camera's capture from that view; the
+//! study itself is [`glint_eval::prediction`].
 
 use std::path::PathBuf;
 
-use anyhow::Context;
-use glint_eval::prediction::{PredictionStudy, grid_markdown, run};
-use glint_geometry::Part;
-use glint_geometry::io::write_file_atomically;
+use glint_eval::prediction::{PredictionExperiment, run, write_outputs};
 
 #[derive(clap::Args)]
 pub struct PredictionArgs {
-    #[arg(long, default_value = "zigzag", value_parser = crate::mesh_cmd::parse_part)]
-    pub part: Part,
-    /// Bins, comma separated: tuning seeds to choose τ (default), evaluation seeds to judge.
-    #[arg(long, default_value = "11,12,13", value_delimiter = ',')]
-    pub seeds: Vec<u64>,
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=64))]
-    pub views: u32,
-    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=64))]
+    /// Parts: `all` or a comma-separated list of eye-bolt, tube-fitting, chrome-screw, gear,
+    /// zigzag.
+    #[arg(long, default_value = "all")]
+    pub parts: String,
+    /// Bins per part (seeds SEED·10⁴ + 9000 + s).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub scenes: u32,
+    /// Candidate views per bin; each is predicted and captured.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(2..=256))]
+    pub candidates: u32,
+    /// Parts per bin.
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=40))]
     pub instances: u32,
-    #[arg(long, default_value = "1280x1024", value_parser = crate::capture_cmd::parse_resolution)]
-    pub resolution: (u32, u32),
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
-    pub spp: u32,
-    /// τ_I values (eq 16), comma separated.
-    #[arg(long, default_value = "0,0.2,0.35,0.5,0.65,0.8", value_delimiter = ',')]
-    pub tau_i: Vec<f64>,
-    /// τ_σ values (eq 17), mm, comma separated.
-    #[arg(long, default_value = "0.25,0.5,1,2,4,1000", value_delimiter = ',')]
-    pub tau_sigma_mm: Vec<f64>,
-    /// Capture depth within this of the true surface counts as usable, mm.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    #[command(flatten)]
+    pub camera: super::MockCameraArgs,
+    /// Evaluation-only control: predict with the simulator's true materials instead of the
+    /// fitted ones; the gap to a run without it is what calibration error costs.
+    #[arg(long)]
+    pub true_materials: bool,
+    /// Captured depth within this of the true surface counts as usable, mm.
     #[arg(long, default_value_t = 1.0)]
     pub good_depth_mm: f64,
     #[command(flatten)]
-    pub calibration: crate::calibration_args::CalibrationArgs,
-    /// Render the bin with the part.
+    pub calibration: crate::calibration_args::PartCalibrationArgs,
+    /// The render workers render the bin with the part (beyond the paper).
     #[arg(long)]
     pub predict_bin: bool,
     #[arg(long)]
@@ -43,51 +42,57 @@ pub struct PredictionArgs {
 }
 
 pub fn run_cmd(args: &PredictionArgs) -> anyhow::Result<()> {
-    let finite = |v: &f64| v.is_finite() && *v >= 0.0;
-    anyhow::ensure!(
-        args.tau_i.iter().all(|t| finite(t) && *t <= 1.0),
-        "--tau-i: values in [0, 1]"
-    );
-    anyhow::ensure!(
-        args.tau_sigma_mm.iter().all(|t| finite(t) && *t > 0.0),
-        "--tau-sigma-mm: positive values"
-    );
-    anyhow::ensure!(
-        finite(&args.good_depth_mm) && args.good_depth_mm > 0.0,
-        "--good-depth-mm: a positive number"
-    );
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    let calibration = args.calibration.load(args.part)?;
-    let study = PredictionStudy {
-        part: args.part,
-        seeds: args.seeds.clone(),
-        views: args.views as usize,
+    if !(args.good_depth_mm.is_finite() && args.good_depth_mm > 0.0) {
+        anyhow::bail!("--good-depth-mm {}: a positive number", args.good_depth_mm);
+    }
+    let parts = super::parse_parts(&args.parts)?;
+    let objects = glint_eval::scenes::eval_objects(
+        &parts,
+        None,
+        glint_geometry::LengthUnit::Millimetre,
+        &glint_geometry::Symmetry::none(),
+        false,
+    )?;
+    let with_calibration = super::calibrated_objects(objects, &parts, &args.calibration, false)?;
+    let spec = PredictionExperiment {
+        objects: with_calibration,
+        scenes: args.scenes,
+        candidates: args.candidates as usize,
         instances: args.instances,
-        width_px: args.resolution.0,
-        height_px: args.resolution.1,
-        samples_per_pixel: args.spp,
-        min_visible_px: 100,
+        seed: args.seed,
+        camera: args.camera.spec(),
+        true_materials: args.true_materials,
+        predict_with_bin: args.predict_bin,
         good_depth_m: args.good_depth_mm * 1e-3,
-        tau_intensity_ratios: args.tau_i.clone(),
-        tau_sigmas_m: args.tau_sigma_mm.iter().map(|t| t * 1e-3).collect(),
-        with_bin: args.predict_bin,
+        out: args.out.clone(),
     };
-    let started = std::time::Instant::now();
-    let bar = glint_eval::progress::bar((study.seeds.len() * study.views) as u64, "views");
-    let grid = run(&study, &calibration, || bar.inc(1))?;
-    bar.finish_and_clear();
-    let table = grid_markdown(&grid);
     println!(
-        "Missing-pixel prediction on the {}: bins {:?}, {} views each, instances with ≥ 100 \
-         visible px, true pose, calibrated material; usable = capture depth within {} mm of \
-         the true surface.\n\n{table}\n{:.0} s.",
-        args.part.display_name(),
-        study.seeds,
-        study.views,
-        args.good_depth_mm,
-        started.elapsed().as_secs_f64()
+        "Predicted against captured: {} part(s) × {} bins × {} candidates, {}, {} materials; \
+         both judged at the true pose.",
+        spec.objects.len(),
+        spec.scenes,
+        spec.candidates,
+        spec.camera,
+        spec.materials_label()
     );
-    write_file_atomically(&args.out.join("thresholds.md"), table.as_bytes())?;
+    let started = std::time::Instant::now();
+    let bar = glint_eval::progress::bar(u64::from(spec.scenes) * spec.objects.len() as u64, "bins");
+    let (rows, fig8) = run(&spec, |part, scene| {
+        bar.suspend(|| {
+            println!(
+                "  {part} bin {scene} ({:.0} s so far)",
+                started.elapsed().as_secs_f64()
+            )
+        });
+        bar.inc(1);
+    })?;
+    bar.finish_and_clear();
+    let table = write_outputs(&spec, &rows, &fig8)?;
+    println!("{table}");
+    println!(
+        "{:.0} s in all. Report: {}",
+        started.elapsed().as_secs_f64(),
+        spec.out.join("index.html").display()
+    );
     Ok(())
 }

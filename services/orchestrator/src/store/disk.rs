@@ -453,11 +453,7 @@ mod tests {
         let mesh = glint_geometry::TriMesh::uv_sphere(0.01, 8);
         StoredSession {
             session: Session::new(id.into(), config).unwrap(),
-            object: SessionObject {
-                name: part_name.into(),
-                mesh_sha256_hex: mesh.content_sha256_hex(),
-                mesh: Arc::new(mesh),
-            },
+            object: SessionObject::new(part_name, mesh),
             calibration: None,
         }
     }
