@@ -465,6 +465,7 @@ fn eval_prediction_rejects_bad_arguments_before_writing() {
         &[
             (vec!["--good-depth-mm=-1"], "--good-depth-mm"),
             (vec!["--candidates", "1"], "--candidates"),
+            (vec!["--min-visib-fract", "1.5"], "--min-visib-fract"),
         ],
     );
 }
@@ -496,23 +497,26 @@ fn eval_prediction_ranks_every_candidate_of_every_bin() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "part,scene,view,iou_missing,spearman_sigma,logdet_ratio,predicted_rank,oracle_rank"
+        "part,scene,view,iou_missing,spearman_sigma,logdet_ratio,predicted_rank,oracle_rank,\
+         instance"
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    assert_eq!(rows.len(), 6, "{csv}");
-    for scene in ["0", "1"] {
-        for column in [6, 7] {
-            let mut ranks: Vec<&str> = rows
-                .iter()
-                .filter(|r| r[1] == scene)
-                .map(|r| r[column])
-                .collect();
+    // Every ranking (bin, instance) ranks the 3 candidates 1, 2, 3 both ways.
+    let mut rankings: std::collections::BTreeMap<(&str, &str), [Vec<&str>; 2]> = Default::default();
+    for r in &rows {
+        let entry = rankings.entry((r[1], r[8])).or_default();
+        entry[0].push(r[6]);
+        entry[1].push(r[7]);
+    }
+    assert!(rankings.len() >= 2, "{csv}");
+    assert!(
+        rankings.keys().any(|k| k.0 == "1"),
+        "both bins judged: {csv}"
+    );
+    for (key, mut columns) in rankings {
+        for ranks in &mut columns {
             ranks.sort_unstable();
-            assert_eq!(
-                ranks,
-                ["1", "2", "3"],
-                "bin {scene}, column {column}: {csv}"
-            );
+            assert_eq!(ranks, &["1", "2", "3"], "{key:?}: {csv}");
         }
     }
     for r in &rows {

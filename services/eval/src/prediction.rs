@@ -20,7 +20,8 @@
 //! (Fig. 9 measures it from the detector's pose); the predictor still knows only the
 //! calibrated material and response — or, as the evaluation-only control
 //! `true_materials`, the simulator's true material, to show what calibration error costs.
-//! The instance judged in each bin is the one most visible from the first candidate.
+//! The instances judged in each bin are the most visible from the first candidate; each has
+//! its own ranking of the candidates.
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -56,6 +57,11 @@ pub struct PredictionExperiment {
     pub candidates: usize,
     /// Parts per bin.
     pub instances: u32,
+    /// Instances judged per bin: the most visible from the first candidate, among those at
+    /// least `min_visib_fract` visible there.
+    pub judged_instances: usize,
+    /// See `judged_instances`.
+    pub min_visib_fract: f64,
     /// Base seed.
     pub seed: u64,
     /// The mock camera.
@@ -91,6 +97,8 @@ pub struct CandidateRow {
     pub scene: u32,
     /// The candidate's index.
     pub view: usize,
+    /// The judged instance (index into the bin's parts).
+    pub instance: usize,
     /// The judged instance's visible pixels in the capture's truth.
     pub visible_px: usize,
     /// IoU of the predicted and captured missing masks (NaN when fewer than
@@ -245,14 +253,18 @@ pub fn run(
             let setup = &camera.setup;
             let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
             let [left0, _] = setup.rig.cameras(&candidates[0]);
-            let Some(judged) = instance_visibility(&setup.scene, &left0, &labels)
+            // The judged instances: the most visible from the first candidate, enough of
+            // each in view (the same captures serve them all).
+            let mut judged: Vec<_> = instance_visibility(&setup.scene, &left0, &labels)
                 .into_iter()
-                .max_by_key(|v| v.px_count_visib)
-            else {
+                .filter(|v| v.visib_fract >= spec.min_visib_fract)
+                .collect();
+            judged.sort_by_key(|v| std::cmp::Reverse(v.px_count_visib));
+            judged.truncate(spec.judged_instances);
+            if judged.is_empty() {
+                on_scene(&object.name, s);
                 continue;
-            };
-            let label = judged.label;
-            let gt_t_w_o = setup.poses[usize::from(label - 1)];
+            }
             let predictor = prediction_object_for(
                 &camera,
                 &candidates[0],
@@ -268,23 +280,29 @@ pub fn run(
                 ..PredictionSettings::default()
             };
             let predictor = predictor.predictor(grid.clone());
-            let predictions = candidates
-                .par_iter()
-                .enumerate()
-                .map(|(k, t_w_c)| {
-                    predict_candidate(
-                        &predictor,
-                        &gt_t_w_o,
-                        t_w_c,
-                        &settings,
-                        candidate_seed(spec.seed, k as u32),
-                    )
-                    .map_err(|e| anyhow::anyhow!("predicting view {k}: {e}"))
+            // predictions[j][k]: judged instance j from candidate k, at its true pose.
+            let predictions = judged
+                .iter()
+                .map(|v| {
+                    let gt_t_w_o = setup.poses[usize::from(v.label - 1)];
+                    candidates
+                        .par_iter()
+                        .enumerate()
+                        .map(|(k, t_w_c)| {
+                            predict_candidate(
+                                &predictor,
+                                &gt_t_w_o,
+                                t_w_c,
+                                &settings,
+                                candidate_seed(spec.seed, k as u32),
+                            )
+                            .map_err(|e| anyhow::anyhow!("predicting view {k}: {e}"))
+                        })
+                        .collect::<anyhow::Result<Vec<_>>>()
                 })
                 .collect::<anyhow::Result<Vec<_>>>()?;
-            let mut scene_rows = Vec::new();
-            let mut entropies = (Vec::new(), Vec::new());
-            for (k, (t_w_c, predicted)) in candidates.iter().zip(&predictions).enumerate() {
+            let mut scene_rows: Vec<Vec<CandidateRow>> = vec![Vec::new(); judged.len()];
+            for (k, t_w_c) in candidates.iter().enumerate() {
                 let (captured, truth) = camera
                     .capture_with_truth(t_w_c, capture_seed(scene_seed, k))
                     .map_err(|e| anyhow::anyhow!("capturing view {k}: {e}"))?;
@@ -296,18 +314,10 @@ pub fn run(
                         noise: None,
                     },
                 )?;
-                let on_instance = |u: u32, v: u32| truth.label.get(u, v) == Some(label);
-                let mask = truth.label.map(|l| l == label);
-                let points =
-                    points_in_mask(view, &mask, &sigma, spec.camera.window_radius_px)?.points;
-                let captured_information = information_of_points(
-                    &grid,
-                    &points,
-                    &gt_t_w_o.inverse(),
-                    settings.model_sigma_m,
-                );
-                let h_pred = pose_entropy_nats(&predicted.information, &prior)?;
-                let h_capt = pose_entropy_nats(&captured_information, &prior)?;
+                let captured_sigma = match &sigma {
+                    ViewSigma::PerPixel(image) => image.clone(),
+                    ViewSigma::Constant(c) => truth.label.map(|_| *c as f32),
+                };
                 let usable = |u: u32, v: u32| {
                     let z_true = truth.depth_m.get(u, v).unwrap_or(f32::NAN);
                     view.depth
@@ -315,62 +325,79 @@ pub fn run(
                         .get(u, v)
                         .is_some_and(|z| f64::from((z - z_true).abs()) <= spec.good_depth_m)
                 };
-                let scores = match (&predicted.crop, &predicted.cause, &predicted.sigma_z_m) {
-                    (Some(crop), Some(cause), Some(sigma_z)) => {
-                        let captured_sigma = match &sigma {
-                            ViewSigma::PerPixel(image) => image.clone(),
-                            ViewSigma::Constant(c) => truth.label.map(|_| *c as f32),
-                        };
-                        pixel_scores(crop, cause, sigma_z, &captured_sigma, on_instance, usable)
-                    }
-                    _ => PixelScores {
-                        visible_px: truth.label.data().iter().filter(|&&l| l == label).count(),
-                        iou_missing: f64::NAN,
-                        spearman_sigma: f64::NAN,
-                    },
-                };
-                entropies.0.push(h_pred);
-                entropies.1.push(h_capt);
-                scene_rows.push(CandidateRow {
-                    part: object.name.clone(),
-                    scene: s,
-                    view: k,
-                    visible_px: scores.visible_px,
-                    iou_missing: scores.iou_missing,
-                    spearman_sigma: scores.spearman_sigma,
-                    // Entropy is −½ ln |F + P| plus a constant (eq 20).
-                    logdet_ratio: 2.0 * (h_capt - h_pred),
-                    predicted_rank: 0,
-                    oracle_rank: 0,
-                    predicted_entropy_nats: h_pred,
-                    captured_entropy_nats: h_capt,
-                });
-            }
-            let (predicted_ranks, oracle_ranks) = (ranks(&entropies.0), ranks(&entropies.1));
-            for (row, (p, o)) in scene_rows
-                .iter_mut()
-                .zip(predicted_ranks.iter().zip(&oracle_ranks))
-            {
-                row.predicted_rank = *p;
-                row.oracle_rank = *o;
-            }
-            if s == 0 {
-                let best = predicted_ranks.iter().position(|&r| r == 1).unwrap_or(0);
-                let p = &predictions[best];
-                if let (Some(images), Some(sigma_z_m), Some(cause)) =
-                    (&p.images, &p.sigma_z_m, &p.cause)
-                {
-                    fig8.push(Fig8View {
+                for (j, vis) in judged.iter().enumerate() {
+                    let label = vis.label;
+                    let gt_t_w_o = setup.poses[usize::from(label - 1)];
+                    let predicted = &predictions[j][k];
+                    let on_instance = |u: u32, v: u32| truth.label.get(u, v) == Some(label);
+                    let mask = truth.label.map(|l| l == label);
+                    let points =
+                        points_in_mask(view, &mask, &sigma, spec.camera.window_radius_px)?.points;
+                    let captured_information = information_of_points(
+                        &grid,
+                        &points,
+                        &gt_t_w_o.inverse(),
+                        settings.model_sigma_m,
+                    );
+                    let h_pred = pose_entropy_nats(&predicted.information, &prior)?;
+                    let h_capt = pose_entropy_nats(&captured_information, &prior)?;
+                    let scores = match (&predicted.crop, &predicted.cause, &predicted.sigma_z_m) {
+                        (Some(crop), Some(cause), Some(sigma_z)) => {
+                            pixel_scores(crop, cause, sigma_z, &captured_sigma, on_instance, usable)
+                        }
+                        _ => PixelScores {
+                            visible_px: mask.data().iter().filter(|&&m| m).count(),
+                            iou_missing: f64::NAN,
+                            spearman_sigma: f64::NAN,
+                        },
+                    };
+                    scene_rows[j].push(CandidateRow {
                         part: object.name.clone(),
-                        view: best,
-                        images: images.clone(),
-                        sigma_z_m: sigma_z_m.clone(),
-                        cause: cause.clone(),
-                        scale_max_m: settings.tau_sigma_m,
+                        scene: s,
+                        view: k,
+                        instance: usize::from(label - 1),
+                        visible_px: scores.visible_px,
+                        iou_missing: scores.iou_missing,
+                        spearman_sigma: scores.spearman_sigma,
+                        // Entropy is −½ ln |F + P| plus a constant (eq 20).
+                        logdet_ratio: 2.0 * (h_capt - h_pred),
+                        predicted_rank: 0,
+                        oracle_rank: 0,
+                        predicted_entropy_nats: h_pred,
+                        captured_entropy_nats: h_capt,
                     });
                 }
             }
-            rows.extend(scene_rows);
+            for (j, instance_rows) in scene_rows.iter_mut().enumerate() {
+                let of =
+                    |f: fn(&CandidateRow) -> f64| instance_rows.iter().map(f).collect::<Vec<_>>();
+                let predicted_ranks = ranks(&of(|r| r.predicted_entropy_nats));
+                let oracle_ranks = ranks(&of(|r| r.captured_entropy_nats));
+                for (row, (p, o)) in instance_rows
+                    .iter_mut()
+                    .zip(predicted_ranks.iter().zip(&oracle_ranks))
+                {
+                    row.predicted_rank = *p;
+                    row.oracle_rank = *o;
+                }
+                if s == 0 && j == 0 {
+                    let best = predicted_ranks.iter().position(|&r| r == 1).unwrap_or(0);
+                    let p = &predictions[j][best];
+                    if let (Some(images), Some(sigma_z_m), Some(cause)) =
+                        (&p.images, &p.sigma_z_m, &p.cause)
+                    {
+                        fig8.push(Fig8View {
+                            part: object.name.clone(),
+                            view: best,
+                            images: images.clone(),
+                            sigma_z_m: sigma_z_m.clone(),
+                            cause: cause.clone(),
+                            scale_max_m: settings.tau_sigma_m,
+                        });
+                    }
+                }
+            }
+            rows.extend(scene_rows.into_iter().flatten());
             on_scene(&object.name, s);
         }
     }
@@ -390,9 +417,10 @@ pub struct SummaryRow {
     pub mean_spearman_sigma: f64,
     /// Median log-det ratio, nats.
     pub median_logdet_ratio: f64,
-    /// Mean oracle rank of each bin's predicted best view (1 is perfect).
+    /// Mean over rankings (a bin's judged instance) of the predicted best view's oracle rank
+    /// (1 is perfect).
     pub best_oracle_rank: f64,
-    /// Mean over bins of Spearman ρ between predicted and captured entropy.
+    /// Mean over rankings of Spearman ρ between predicted and captured entropy.
     pub rank_spearman: f64,
 }
 
@@ -416,11 +444,16 @@ pub fn summary(rows: &[CandidateRow]) -> Vec<SummaryRow> {
     let of = |name: &str, rows: Vec<&CandidateRow>| {
         let mut logdet: Vec<f64> = rows.iter().map(|r| r.logdet_ratio).collect();
         logdet.sort_by(f64::total_cmp);
-        let mut bins: Vec<(&str, u32)> = rows.iter().map(|r| (r.part.as_str(), r.scene)).collect();
+        // A ranking is over one instance's candidates in one bin.
+        let mut bins: Vec<(&str, u32, usize)> = rows
+            .iter()
+            .map(|r| (r.part.as_str(), r.scene, r.instance))
+            .collect();
+        bins.sort_unstable();
         bins.dedup();
-        let in_bin = |b: &(&str, u32)| {
+        let in_bin = |b: &(&str, u32, usize)| {
             rows.iter()
-                .filter(|r| (r.part.as_str(), r.scene) == *b)
+                .filter(|r| (r.part.as_str(), r.scene, r.instance) == *b)
                 .collect::<Vec<_>>()
         };
         SummaryRow {
@@ -454,12 +487,13 @@ pub fn summary(rows: &[CandidateRow]) -> Vec<SummaryRow> {
 /// `prediction.csv`: one row per candidate.
 pub fn prediction_csv(rows: &[CandidateRow]) -> String {
     let mut out = String::from(
-        "part,scene,view,iou_missing,spearman_sigma,logdet_ratio,predicted_rank,oracle_rank\n",
+        "part,scene,view,iou_missing,spearman_sigma,logdet_ratio,predicted_rank,oracle_rank,\
+         instance\n",
     );
     for r in rows {
         let _ = writeln!(
             out,
-            "{},{},{},{:.4},{:.4},{:.4},{},{}",
+            "{},{},{},{:.4},{:.4},{:.4},{},{},{}",
             r.part,
             r.scene,
             r.view,
@@ -467,7 +501,8 @@ pub fn prediction_csv(rows: &[CandidateRow]) -> String {
             r.spearman_sigma,
             r.logdet_ratio,
             r.predicted_rank,
-            r.oracle_rank
+            r.oracle_rank,
+            r.instance
         );
     }
     out
@@ -658,6 +693,7 @@ mod tests {
             part: "gear".into(),
             scene: 0,
             view,
+            instance: 2,
             visible_px: 100,
             iou_missing: 0.5,
             // Unjudged on view 0: the mean is over the judged ones.

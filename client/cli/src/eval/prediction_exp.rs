@@ -21,6 +21,12 @@ pub struct PredictionArgs {
     /// Parts per bin.
     #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=40))]
     pub instances: u32,
+    /// Instances judged per bin (each ranks the candidates): the most visible from the first
+    /// candidate, among those at least --min-visib-fract visible there.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=40))]
+    pub judged_instances: u32,
+    #[arg(long, default_value_t = 0.5)]
+    pub min_visib_fract: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     #[command(flatten)]
@@ -45,6 +51,12 @@ pub fn run_cmd(args: &PredictionArgs) -> anyhow::Result<()> {
     if !(args.good_depth_mm.is_finite() && args.good_depth_mm > 0.0) {
         anyhow::bail!("--good-depth-mm {}: a positive number", args.good_depth_mm);
     }
+    if !(args.min_visib_fract.is_finite() && (0.0..=1.0).contains(&args.min_visib_fract)) {
+        anyhow::bail!(
+            "--min-visib-fract {}: a share from 0 to 1",
+            args.min_visib_fract
+        );
+    }
     let parts = super::parse_parts(&args.parts)?;
     let objects = glint_eval::scenes::eval_objects(
         &parts,
@@ -59,6 +71,8 @@ pub fn run_cmd(args: &PredictionArgs) -> anyhow::Result<()> {
         scenes: args.scenes,
         candidates: args.candidates as usize,
         instances: args.instances,
+        judged_instances: args.judged_instances as usize,
+        min_visib_fract: args.min_visib_fract,
         seed: args.seed,
         camera: args.camera.spec(),
         true_materials: args.true_materials,
