@@ -120,7 +120,7 @@ pub struct PredictionSettings {
 impl Default for PredictionSettings {
     /// τ_I 0.8 and τ_σ 0.03 mm, chosen on tuning seeds 11–13 (Zigzag, 3 views each, the
     /// bin rendered too) by the best balanced accuracy of "usable depth" against the mock
-    /// camera's captures (`glint eval prediction --predict-bin --tau-i 0.5,0.7,0.8,0.85,0.9,0.95
+    /// camera's captures (`glint eval thresholds --predict-bin --tau-i 0.5,0.7,0.8,0.85,0.9,0.95
     /// --tau-sigma-mm 0.03,0.05,0.08,0.12,0.2,1000`: 0.765; the part alone peaks at 0.85 /
     /// 0.03 mm with 0.687); the evaluation seeds are disjoint. 2 spp, the default camera's
     /// K = 8 shots, 3×3 windows and half-lit patterns, the refiner's σ_model. τ_σ is for that
