@@ -44,29 +44,21 @@ use glint_orchestrator::session::{CONST_SIGMA_Z_M, ViewPolicy};
 use glint_orchestrator::stages::{
     CameraStage, PredictionObject, PredictionRequest, PredictionStage,
 };
+use glint_render::integrator::render_labels;
 use nalgebra::{Isometry3, Matrix6};
 use rand::SeedableRng;
 use rayon::prelude::*;
 
-use crate::active::{Calibration, prediction_object_for};
+use crate::active::prediction_object_for;
 use crate::initial_pose::InitialPoseNoise;
 use crate::metrics::paired_sign_flip_p;
-use crate::scenes::{EvalObject, MockCameraSpec, bin_seed, mock_bin};
-
-/// A part of the experiment with its calibration (what the render workers know of it).
-#[derive(Clone, Debug)]
-pub struct NbvObject {
-    /// The part: mesh, symmetry and the material the mock camera paints it with.
-    pub object: EvalObject,
-    /// Its fitted material and calibrated response (`glint calibrate …`), never the truth.
-    pub calibration: Calibration,
-}
+use crate::scenes::{CalibratedObject, MockCameraSpec, bin_seed, mock_bin, names_in_order};
 
 /// The settings of one Fig. 9 run (`glint eval nbv`'s flags).
 #[derive(Clone, Debug)]
 pub struct NbvExperiment {
     /// The parts, each with its calibration.
-    pub objects: Vec<NbvObject>,
+    pub objects: Vec<CalibratedObject>,
     /// Bins per part.
     pub scenes: u32,
     /// Detection views per bin: trials start from a detector's guess at each of these
@@ -137,7 +129,7 @@ struct Run {
 }
 
 /// One step of one run: the pose after `views` views.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct StepRow {
     /// The part's name.
     pub part: String,
@@ -157,10 +149,8 @@ pub struct StepRow {
     pub view: usize,
     /// Points of the instance in this view.
     pub view_points: usize,
-    /// Translation error of the pose against the truth (symmetry-aware), mm.
-    pub err_mm: f64,
-    /// Rotation error of the pose against the truth (symmetry-aware), degrees.
-    pub err_deg: f64,
+    /// The pose's error against the truth (symmetry-aware).
+    pub deviation: PoseDeviation,
     /// Pose entropy after the step (eq 18's information with the prior), nats.
     pub entropy_nats: f64,
     /// The entropy the policy predicted for this view (entropy policies), nats.
@@ -170,16 +160,13 @@ pub struct StepRow {
     pub status: String,
     /// Time the decision for this view spent predicting candidates, ms.
     pub predict_ms: f64,
-    /// The initial pose's error (translation mm, rotation degrees) against the truth.
-    pub initial_err_mm: f64,
-    /// See `initial_err_mm`.
-    pub initial_err_deg: f64,
+    /// The initial pose's error against the truth.
+    pub initial_deviation: PoseDeviation,
 }
 
 impl StepRow {
     fn correct(&self, threshold: &CorrectThreshold) -> bool {
-        self.err_mm * 1e-3 < threshold.translation_m
-            && self.err_deg.to_radians() < threshold.rotation_rad
+        self.deviation.is_correct(threshold)
     }
 }
 
@@ -210,11 +197,12 @@ fn capture_view(
     )?;
     let setup = &camera.setup;
     let [left, _] = setup.rig.cameras(t_w_c);
-    let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
-    let points = instance_visibility(&setup.scene, &left, &labels)
-        .iter()
-        .map(|v| {
-            let mask = v.mask_visib.map(|m| m > 0);
+    // Each instance's visible mask (what `instance_visibility` calls `mask_visib`), without
+    // the amodal renders it would add per instance.
+    let visible_labels = render_labels(&setup.scene, &left, None, None);
+    let points = (1..=setup.poses.len() as u16)
+        .map(|label| {
+            let mask = visible_labels.map(|l| l == label);
             Ok(points_in_mask(&view, &mask, &sigma, window_radius_px)?.points)
         })
         .collect::<anyhow::Result<_>>()?;
@@ -500,14 +488,12 @@ pub fn run(
                             .get(&view)
                             .and_then(|c| c.points.get(trial.instance))
                             .map_or(0, Vec::len),
-                        err_mm: d.translation_mm(),
-                        err_deg: d.rotation_deg(),
+                        deviation: d,
                         entropy_nats: pose_entropy_nats(&r.information, &prior)?,
                         predicted_entropy_nats: r.predicted_entropy_nats,
                         status,
                         predict_ms: r.predict_ms,
-                        initial_err_mm: d0.translation_mm(),
-                        initial_err_deg: d0.rotation_deg(),
+                        initial_deviation: d0,
                     });
                 }
             }
@@ -567,20 +553,15 @@ fn successes(
 pub fn rates(rows: &[StepRow], policies: &[ViewPolicy], max_views: usize) -> Vec<RateRow> {
     let five = successes(rows, &CorrectThreshold::MM5_DEG5);
     let two = successes(rows, &CorrectThreshold::MM2_DEG2);
-    let mut parts: Vec<String> = Vec::new();
-    for r in rows {
-        if !parts.contains(&r.part) {
-            parts.push(r.part.clone());
-        }
-    }
-    parts.push("all".into());
+    let mut parts = names_in_order(rows.iter().map(|r| r.part.as_str()));
+    parts.push("all");
     let mut out = Vec::new();
     for part in &parts {
         for &policy in policies {
             let name = policy_column(policy);
             for views in 1..=max_views {
                 let keep = |k: &(&'static str, TrialKey)| {
-                    k.0 == name && k.1.4 == views && (part == "all" || &k.1.0 == part)
+                    k.0 == name && k.1.4 == views && (*part == "all" || k.1.0 == *part)
                 };
                 let hits: Vec<f64> = five.iter().filter(|(k, _)| keep(k)).map(|e| *e.1).collect();
                 let hits2: Vec<f64> = two.iter().filter(|(k, _)| keep(k)).map(|e| *e.1).collect();
@@ -589,7 +570,7 @@ pub fn rates(rows: &[StepRow], policies: &[ViewPolicy], max_views: usize) -> Vec
                 }
                 let n = hits.len();
                 out.push(RateRow {
-                    part: part.clone(),
+                    part: part.to_string(),
                     policy: name,
                     views,
                     n,
@@ -627,13 +608,8 @@ pub fn paired(rows: &[StepRow], policies: &[ViewPolicy], max_views: usize) -> Ve
     if !policies.contains(&ViewPolicy::Nbv) {
         return out;
     }
-    let mut parts: Vec<String> = Vec::new();
-    for r in rows {
-        if !parts.contains(&r.part) {
-            parts.push(r.part.clone());
-        }
-    }
-    parts.push("all".into());
+    let mut parts = names_in_order(rows.iter().map(|r| r.part.as_str()));
+    parts.push("all");
     for (threshold_name, threshold) in [
         ("5mm5deg", CorrectThreshold::MM5_DEG5),
         ("2mm2deg", CorrectThreshold::MM2_DEG2),
@@ -645,7 +621,7 @@ pub fn paired(rows: &[StepRow], policies: &[ViewPolicy], max_views: usize) -> Ve
                     let mut d: Vec<f64> = s
                         .iter()
                         .filter(|((p, k), _)| {
-                            *p == "nbv" && k.4 == views && (part == "all" || &k.0 == part)
+                            *p == "nbv" && k.4 == views && (*part == "all" || k.0 == *part)
                         })
                         .filter_map(|((_, k), &nbv)| {
                             Some(nbv - s.get(&(policy_column(other), k.clone()))?)
@@ -657,7 +633,7 @@ pub fn paired(rows: &[StepRow], policies: &[ViewPolicy], max_views: usize) -> Ve
                     // The map's order is arbitrary; the test's resampling is seeded, so sort.
                     d.sort_by(f64::total_cmp);
                     out.push(PairedRow {
-                        part: part.clone(),
+                        part: part.to_string(),
                         other: policy_column(other),
                         views,
                         threshold: threshold_name,
@@ -704,15 +680,15 @@ pub fn trials_csv(rows: &[StepRow]) -> String {
             r.views,
             r.view,
             r.view_points,
-            r.err_mm,
-            r.err_deg,
+            r.deviation.translation_mm(),
+            r.deviation.rotation_deg(),
             r.entropy_nats,
             r.predicted_entropy_nats
                 .map_or(String::new(), |h| format!("{h:.4}")),
             r.status.replace(',', ";"),
             r.predict_ms,
-            r.initial_err_mm,
-            r.initial_err_deg
+            r.initial_deviation.translation_mm(),
+            r.initial_deviation.rotation_deg()
         );
     }
     out
@@ -727,12 +703,7 @@ pub fn table_markdown(
     max_views: usize,
 ) -> String {
     let mut out = String::new();
-    let mut parts: Vec<&str> = Vec::new();
-    for r in rates {
-        if !parts.contains(&r.part.as_str()) {
-            parts.push(&r.part);
-        }
-    }
+    let parts = names_in_order(rates.iter().map(|r| r.part.as_str()));
     let _ = writeln!(
         out,
         "Rates within 5 mm/5° · 2 mm/2° (%), n trials per cell (Random: the mean of its draws).\n"
@@ -805,12 +776,7 @@ pub fn fig9_png(
     max_views: usize,
 ) -> anyhow::Result<Vec<u8>> {
     use plotters::prelude::*;
-    let mut parts: Vec<&str> = Vec::new();
-    for r in rates {
-        if !parts.contains(&r.part.as_str()) {
-            parts.push(&r.part);
-        }
-    }
+    let parts = names_in_order(rates.iter().map(|r| r.part.as_str()));
     let colours = [BLUE, RGBColor(230, 180, 0), RED, GREEN, MAGENTA, CYAN];
     let columns = 3usize;
     let rows_n = parts.len().div_ceil(columns).max(1);
@@ -919,14 +885,18 @@ mod tests {
             views,
             view: 0,
             view_points: 10,
-            err_mm: err,
-            err_deg: err,
+            deviation: PoseDeviation {
+                translation_m: err * 1e-3,
+                rotation_rad: err.to_radians(),
+            },
             entropy_nats: 0.0,
             predicted_entropy_nats: None,
             status: "converged".into(),
             predict_ms: 0.0,
-            initial_err_mm: 10.0,
-            initial_err_deg: 10.0,
+            initial_deviation: PoseDeviation {
+                translation_m: 10e-3,
+                rotation_rad: 10f64.to_radians(),
+            },
         }
     }
 

@@ -41,15 +41,14 @@ use glint_uncertainty::{PixelCause, PredictionSettings, candidate_seed, predict_
 use rayon::prelude::*;
 
 use crate::active::{MISSING_RGB, prediction_object_for};
-use crate::fig9::NbvObject;
-use crate::metrics::spearman;
-use crate::scenes::{MockCameraSpec, bin_seed, mock_bin};
+use crate::metrics::{mean, median, spearman};
+use crate::scenes::{CalibratedObject, MockCameraSpec, bin_seed, mock_bin, names_in_order};
 
 /// The settings of one study (`glint eval prediction`'s flags).
 #[derive(Clone, Debug)]
 pub struct PredictionExperiment {
     /// The parts, each with its calibration.
-    pub objects: Vec<NbvObject>,
+    pub objects: Vec<CalibratedObject>,
     /// Bins per part: bin `s` has seed `seed·10⁴ + 9000 + s` (apart from Fig. 9's and the
     /// threshold tuning's bins).
     pub scenes: u32,
@@ -424,26 +423,15 @@ pub struct SummaryRow {
     pub rank_spearman: f64,
 }
 
+/// The mean of the finite `values` (unjudged ones are NaN); NaN if there are none.
 fn mean_finite(values: impl Iterator<Item = f64>) -> f64 {
-    let v: Vec<f64> = values.filter(|x| x.is_finite()).collect();
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v.iter().sum::<f64>() / v.len() as f64
-    }
+    mean(&values.filter(|x| x.is_finite()).collect::<Vec<_>>())
 }
 
 /// Per part (in order of appearance) and `all`.
 pub fn summary(rows: &[CandidateRow]) -> Vec<SummaryRow> {
-    let mut parts: Vec<&str> = Vec::new();
-    for r in rows {
-        if !parts.contains(&r.part.as_str()) {
-            parts.push(&r.part);
-        }
-    }
+    let parts = names_in_order(rows.iter().map(|r| r.part.as_str()));
     let of = |name: &str, rows: Vec<&CandidateRow>| {
-        let mut logdet: Vec<f64> = rows.iter().map(|r| r.logdet_ratio).collect();
-        logdet.sort_by(f64::total_cmp);
         // A ranking is over one instance's candidates in one bin.
         let mut bins: Vec<(&str, u32, usize)> = rows
             .iter()
@@ -461,7 +449,7 @@ pub fn summary(rows: &[CandidateRow]) -> Vec<SummaryRow> {
             candidates: rows.len(),
             mean_iou_missing: mean_finite(rows.iter().map(|r| r.iou_missing)),
             mean_spearman_sigma: mean_finite(rows.iter().map(|r| r.spearman_sigma)),
-            median_logdet_ratio: logdet.get(logdet.len() / 2).copied().unwrap_or(f64::NAN),
+            median_logdet_ratio: median(rows.iter().map(|r| r.logdet_ratio).collect()),
             best_oracle_rank: mean_finite(bins.iter().filter_map(|b| {
                 in_bin(b)
                     .iter()
@@ -719,7 +707,7 @@ mod tests {
         assert_eq!(s[0].best_oracle_rank, 2.0);
         assert_eq!(s[0].mean_spearman_sigma, 0.3);
         assert_eq!(s[0].rank_spearman, -1.0);
-        // Median of {−2, 3}: the upper one.
-        assert_eq!(s[0].median_logdet_ratio, 3.0);
+        // Median of {−2, 3}: the mean of the middle two.
+        assert_eq!(s[0].median_logdet_ratio, 0.5);
     }
 }

@@ -40,6 +40,26 @@ pub struct EvalObject {
     pub material: PrincipledParams<f32>,
 }
 
+/// An object of an experiment with its calibration (what the render workers know of it).
+#[derive(Clone, Debug)]
+pub struct CalibratedObject {
+    /// The part: mesh, symmetry and the material the mock camera paints it with.
+    pub object: EvalObject,
+    /// Its fitted material and calibrated response (`glint calibrate …`), never the truth.
+    pub calibration: glint_calibration::shipped::Calibration,
+}
+
+/// The distinct `names` in the order they first appear (the parts of a result table).
+pub fn names_in_order<'a>(names: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
+    let mut out: Vec<&str> = Vec::new();
+    for name in names {
+        if !out.contains(&name) {
+            out.push(name);
+        }
+    }
+    out
+}
+
 impl EvalObject {
     /// The part as a session knows it: its name and mesh (never its material or poses).
     pub fn session_object(&self) -> SessionObject {

@@ -106,7 +106,7 @@ pub fn calibrated_objects(
     parts: &[glint_geometry::Part],
     calibration: &crate::calibration_args::PartCalibrationArgs,
     mesh: bool,
-) -> anyhow::Result<Vec<glint_eval::fig9::NbvObject>> {
+) -> anyhow::Result<Vec<glint_eval::scenes::CalibratedObject>> {
     use anyhow::Context;
     if calibration.one.material.is_some() && !mesh && parts.len() != 1 {
         anyhow::bail!(
@@ -125,7 +125,7 @@ pub fn calibrated_objects(
                     .with_context(|| format!("the {}'s calibration", part.display_name()))?,
                 None => calibration.one.load(glint_geometry::Part::TubeFitting)?,
             };
-            Ok(glint_eval::fig9::NbvObject {
+            Ok(glint_eval::scenes::CalibratedObject {
                 object,
                 calibration,
             })
