@@ -18,6 +18,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use glint_geometry::camera::PinholeIntrinsics;
+use glint_geometry::image::PixelRect;
 use glint_geometry::io::{PlyEncoding, write_file_atomically, write_ply};
 use glint_geometry::{LengthUnit, TriMesh};
 use glint_render::bsdf::PrincipledParams;
@@ -72,6 +73,56 @@ fn principled_json(p: &PrincipledParams<f32>) -> Value {
     Value::Object(map)
 }
 
+/// Most surface interactions per path and the interaction after which Russian roulette may
+/// end one (none for single-path).
+fn path_depth(transport: LightTransport) -> (u32, Option<u32>) {
+    match transport {
+        LightTransport::SinglePath => (1, None),
+        LightTransport::MultiPath {
+            max_bounces,
+            roulette_after,
+            ..
+        } => (max_bounces, Some(roulette_after)),
+    }
+}
+
+/// Writes each shape's PLY under `dir/meshes/` and returns the `shapes` and `materials` of a
+/// scene description (each shape names its material by index).
+fn write_shapes(
+    dir: &Path,
+    shapes: &[ExportShape],
+    materials: &[(&str, PrincipledParams<f32>)],
+) -> anyhow::Result<(Vec<Value>, Vec<Value>)> {
+    std::fs::create_dir_all(dir.join("meshes"))
+        .with_context(|| format!("creating {}", dir.join("meshes").display()))?;
+    let mut shapes_json = Vec::new();
+    for shape in shapes {
+        let file = format!("meshes/{}.ply", shape.name);
+        write_ply(
+            &dir.join(&file),
+            &shape.mesh_w,
+            LengthUnit::Metre,
+            PlyEncoding::BinaryLittleEndian,
+        )
+        .with_context(|| format!("writing {}", dir.join(&file).display()))?;
+        let material = materials
+            .iter()
+            .position(|(name, _)| *name == shape.material)
+            .with_context(|| format!("shape {} has no material {}", shape.name, shape.material))?;
+        shapes_json.push(json!({
+            "name": shape.name,
+            "file": file,
+            "material": material,
+            "label": shape.label,
+        }));
+    }
+    let materials_json = materials
+        .iter()
+        .map(|(name, p)| json!({ "name": name, "principled": principled_json(p) }))
+        .collect();
+    Ok((shapes_json, materials_json))
+}
+
 /// Writes the export into `dir` (created if missing) and returns the path of `scene.json`.
 pub fn write(dir: &Path, export: &MitsubaExport) -> anyhow::Result<std::path::PathBuf> {
     anyhow::ensure!(
@@ -81,35 +132,7 @@ pub fn write(dir: &Path, export: &MitsubaExport) -> anyhow::Result<std::path::Pa
         ),
         "the Mitsuba export needs the projector's white pattern"
     );
-    std::fs::create_dir_all(dir.join("meshes"))
-        .with_context(|| format!("creating {}", dir.join("meshes").display()))?;
-    let mut shapes = Vec::new();
-    for shape in &export.shapes {
-        let file = format!("meshes/{}.ply", shape.name);
-        write_ply(
-            &dir.join(&file),
-            &shape.mesh_w,
-            LengthUnit::Metre,
-            PlyEncoding::BinaryLittleEndian,
-        )
-        .with_context(|| format!("writing {}", dir.join(&file).display()))?;
-        let material = export
-            .materials
-            .iter()
-            .position(|(name, _)| *name == shape.material)
-            .with_context(|| format!("shape {} has no material {}", shape.name, shape.material))?;
-        shapes.push(json!({
-            "name": shape.name,
-            "file": file,
-            "material": material,
-            "label": shape.label,
-        }));
-    }
-    let materials: Vec<Value> = export
-        .materials
-        .iter()
-        .map(|(name, p)| json!({ "name": name, "principled": principled_json(p) }))
-        .collect();
+    let (shapes, materials) = write_shapes(dir, &export.shapes, &export.materials)?;
 
     let threads = rayon::current_num_threads();
     let mut renders = Vec::new();
@@ -141,14 +164,7 @@ pub fn write(dir: &Path, export: &MitsubaExport) -> anyhow::Result<std::path::Pa
             ],
         )
         .with_context(|| format!("writing {}", dir.join(&file).display()))?;
-        let (max_bounces, roulette_after) = match transport {
-            LightTransport::SinglePath => (1, None),
-            LightTransport::MultiPath {
-                max_bounces,
-                roulette_after,
-                ..
-            } => (max_bounces, Some(roulette_after)),
-        };
+        let (max_bounces, roulette_after) = path_depth(transport);
         renders.push(json!({
             "transport": name,
             // Surface interactions with next-event estimation at each (Mitsuba's max_depth is
@@ -189,6 +205,91 @@ pub fn write(dir: &Path, export: &MitsubaExport) -> anyhow::Result<std::path::Pa
         "renders": renders,
     });
     let path = dir.join("scene.json");
+    write_file_atomically(&path, serde_json::to_string_pretty(&scene_json)?.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
+}
+
+/// One candidate view of a `glint bench nbv` decision: where the rig stands and the crops the
+/// prediction rendered (none when the part is not in view).
+pub struct NbvExportCandidate {
+    /// Left and right cameras (full-sensor intrinsics, placed in the world).
+    pub cameras: [Camera; 2],
+    /// Projector → world.
+    pub t_w_p: Isometry3<f64>,
+    /// The left crop the prediction rendered.
+    pub left_crop: Option<PixelRect>,
+    /// First column of the right crop (the left crop's size and rows), px; may be off the
+    /// sensor.
+    pub right_crop_u_min_px: Option<i64>,
+}
+
+/// What `glint bench nbv --mitsuba-export` hands `mitsuba_nbv_bench.py`: the prediction's scene
+/// (the part at the hypothesis pose with the fitted material, the known surroundings), the
+/// candidates and Glint's times of the same decision.
+pub struct NbvExport<'a> {
+    pub shapes: Vec<ExportShape<'a>>,
+    pub materials: Vec<(&'a str, PrincipledParams<f32>)>,
+    /// The projector's optics and radiant intensity (its pose is per candidate).
+    pub projector: &'a Projector,
+    pub candidates: Vec<NbvExportCandidate>,
+    /// Samples per pixel of every prediction render.
+    pub samples_per_pixel: u32,
+    /// The multi-path white render's transport.
+    pub multi_path: LightTransport,
+    /// Glint's decision times, one JSON object per thread count.
+    pub glint_times: Vec<Value>,
+}
+
+/// Writes the NBV export into `dir` (created if missing) and returns the path of
+/// `nbv_scene.json` (written last: its presence means the export is complete).
+pub fn write_nbv(dir: &Path, export: &NbvExport) -> anyhow::Result<std::path::PathBuf> {
+    let (shapes, materials) = write_shapes(dir, &export.shapes, &export.materials)?;
+    let crop_json = |r: &PixelRect, u_min: i64| json!({ "u_min": u_min, "v_min": r.v_min, "width": r.width, "height": r.height });
+    let candidates: Vec<Value> = export
+        .candidates
+        .iter()
+        .map(|c| {
+            let crops = match (c.left_crop, c.right_crop_u_min_px) {
+                (Some(r), Some(u_right)) => {
+                    json!([crop_json(&r, i64::from(r.u_min)), crop_json(&r, u_right)])
+                }
+                _ => Value::Null,
+            };
+            json!({
+                "cameras": c.cameras.iter().map(|cam| json!({
+                    "intrinsics": intrinsics_json(&cam.intrinsics),
+                    "t_w_c": matrix_rows(&cam.t_w_c),
+                })).collect::<Vec<_>>(),
+                "t_w_p": matrix_rows(&c.t_w_p),
+                "crops": crops,
+            })
+        })
+        .collect();
+    let (max_bounces, roulette_after) = path_depth(export.multi_path);
+    let p = export.projector;
+    let scene_json = json!({
+        "written_by": "glint bench nbv --mitsuba-export",
+        "length_unit": "m",
+        "radiance_unit": "W/(sr m^2)",
+        "monochrome": true,
+        "shading": "geometric (face) normals, two-sided",
+        "frame": "cameras and projector: x right, y down, z forward",
+        "shapes": shapes,
+        "materials": materials,
+        "projector": {
+            "intrinsics": intrinsics_json(&p.intrinsics),
+            "pattern": "white",
+            "intensity_w_per_sr": p.intensity_w_per_sr,
+            "profile": "constant radiant intensity inside the frustum, zero outside",
+        },
+        "candidates": candidates,
+        "renders_per_candidate": "single-path and multi-path white, left and right crop",
+        "samples_per_pixel": export.samples_per_pixel,
+        "multi_path": { "max_bounces": max_bounces, "roulette_after": roulette_after },
+        "glint": export.glint_times,
+    });
+    let path = dir.join("nbv_scene.json");
     write_file_atomically(&path, serde_json::to_string_pretty(&scene_json)?.as_bytes())
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(path)

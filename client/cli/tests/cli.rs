@@ -452,3 +452,98 @@ fn refine_bench_prints_its_table_writes_csv_and_exports_problems() {
         assert_eq!(glint["runs"].as_array().unwrap().len(), 3);
     }
 }
+
+#[test]
+fn nbv_bench_exports_its_candidates_and_crops_for_mitsuba() {
+    use glint_geometry::LengthUnit;
+    use glint_geometry::io::read_mesh;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("nbv");
+    let csv = dir.path().join("nbv.csv");
+    let o = glint(&[
+        "bench",
+        "nbv",
+        "--part",
+        "zigzag",
+        "--candidates",
+        "3",
+        "--instances",
+        "3",
+        "--resolution",
+        "320x256",
+        "--csv",
+        csv.to_str().unwrap(),
+        "--mitsuba-export",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(&csv).unwrap();
+    assert!(csv.starts_with("threads,candidates,render_ms,sigma_ms,fim_ms,entropy_ms,total_ms\n"));
+    let scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("nbv_scene.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        scene["glint"].as_array().unwrap().len(),
+        2,
+        "1 thread and all"
+    );
+    // The part (label 1, at the hypothesis pose) and the bin it lies in.
+    let shapes = scene["shapes"].as_array().unwrap();
+    assert_eq!(shapes.len(), 2, "{scene}");
+    assert_eq!(shapes[0]["label"], 1);
+    let mesh = |s: &serde_json::Value| {
+        read_mesh(&out.join(s["file"].as_str().unwrap()), LengthUnit::Metre)
+            .unwrap()
+            .mesh
+    };
+    let (lo, hi) = mesh(&shapes[0]).aabb().unwrap();
+    let centre_w = nalgebra::Point3::from(((lo.coords + hi.coords) / 2.0).cast::<f64>());
+
+    let candidates = scene["candidates"].as_array().unwrap();
+    assert_eq!(candidates.len(), 3);
+    let matrix = |v: &serde_json::Value| {
+        let rows: Vec<Vec<f64>> = serde_json::from_value(v.clone()).unwrap();
+        nalgebra::Matrix4::from_fn(|r, c| rows[r][c])
+    };
+    let mut with_crops = 0;
+    for c in candidates {
+        let Some(crops) = c["crops"].as_array() else {
+            continue;
+        };
+        with_crops += 1;
+        let left = &c["cameras"][0];
+        let k = &left["intrinsics"];
+        assert_eq!(k["width_px"], 320, "full-sensor intrinsics");
+        let num = |v: &serde_json::Value, key: &str| v[key].as_f64().unwrap();
+        // The part's centre projects into the left crop.
+        let p_c = matrix(&left["t_w_c"]).try_inverse().unwrap() * centre_w.to_homogeneous();
+        let u = num(k, "fx_px") * p_c.x / p_c.z + num(k, "cx_px");
+        let v = num(k, "fy_px") * p_c.y / p_c.z + num(k, "cy_px");
+        let (l, r) = (&crops[0], &crops[1]);
+        assert!(
+            u >= num(l, "u_min") && u < num(l, "u_min") + num(l, "width"),
+            "{c}"
+        );
+        assert!(
+            v >= num(l, "v_min") && v < num(l, "v_min") + num(l, "height"),
+            "{c}"
+        );
+        // The right crop has the left's size and rows, shifted left by at least the centre's
+        // disparity f·b/z (b: the right camera's offset along the left's x).
+        assert_eq!(
+            (&r["width"], &r["height"], &r["v_min"]),
+            (&l["width"], &l["height"], &l["v_min"])
+        );
+        let baseline_m = (matrix(&left["t_w_c"]).try_inverse().unwrap()
+            * matrix(&c["cameras"][1]["t_w_c"]))[(0, 3)];
+        let disparity = num(k, "fx_px") * baseline_m / p_c.z;
+        assert!(
+            num(l, "u_min") - num(r, "u_min") >= disparity.floor(),
+            "{c}"
+        );
+    }
+    assert!(
+        with_crops >= 1,
+        "the part is in view of some candidate: {scene}"
+    );
+}

@@ -69,15 +69,35 @@ def fail(msg):
     sys.exit(2)
 
 
+def point_drjit_at_llvm():
+    """Dr.Jit's llvm variants JIT through libLLVM; LLVM 14–16 fail on its code ("Cannot select:
+    fminimum"), so unless DRJIT_LIBLLVM_PATH is set, point it at the newest libLLVM ≥ 17 found
+    (Debian: `apt-get install libllvm19`). Call before importing drjit."""
+    if os.environ.get("DRJIT_LIBLLVM_PATH"):
+        return
+    found = []
+    for d in ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib", "/usr/local/lib"):
+        for f in Path(d).glob("libLLVM-*.so*") if Path(d).is_dir() else []:
+            major = f.name.split("-")[1].split(".")[0]
+            if major.isdigit() and int(major) >= 17:
+                found.append((int(major), str(f)))
+    if found:
+        os.environ["DRJIT_LIBLLVM_PATH"] = max(found)[1]
+
+
 def choose_variant(mi, wanted):
     if wanted:
         mi.set_variant(wanted)
         return wanted
-    for v in ("llvm_ad_mono", "scalar_rgb"):
+    # Without a libLLVM ≥ 17 the llvm variant loads but aborts the process at its first render.
+    llvm = ("llvm_ad_mono",) if os.environ.get("DRJIT_LIBLLVM_PATH") else ()
+    if not llvm:
+        print("note: no libLLVM ≥ 17 found (apt-get install libllvm19); using scalar_rgb", file=sys.stderr)
+    for v in llvm + ("scalar_rgb",):
         try:
             mi.set_variant(v)
             return v
-        except Exception as e:  # llvm variants need libLLVM ≥ 16 (DRJIT_LIBLLVM_PATH)
+        except Exception as e:  # llvm variants need libLLVM ≥ 17 (point_drjit_at_llvm)
             print(f"note: variant {v} unavailable ({e}); trying the next", file=sys.stderr)
     fail("no usable Mitsuba variant")
 
@@ -123,44 +143,52 @@ def load_glint_exr(mi, path):
     return channels
 
 
-def build_scene(mi, scene, root, integrator):
-    cam = scene["camera"]
-    proj = scene["projector"]
+def sensor_dict(mi, k, t_w_c, what, crop=None):
+    """A perspective sensor for Glint camera intrinsics `k` at `t_w_c` (row-major 4×4); `crop`
+    (u_min, v_min, width, height), px, renders only that window of the full film."""
+    film = {
+        "type": "hdrfilm",
+        "width": k["width_px"],
+        "height": k["height_px"],
+        "rfilter": {"type": "box"},
+    }
+    if crop is not None:
+        u, v, w, h = crop
+        film.update({"crop_offset_x": u, "crop_offset_y": v, "crop_width": w, "crop_height": h})
+    return {
+        "type": "perspective",
+        "fov": centred_fov_deg(k, what),
+        "fov_axis": "x",
+        "near_clip": 1e-3,
+        "far_clip": 100.0,
+        "to_world": mi.ScalarTransform4f(flip_xy(t_w_c).tolist()),
+        "film": film,
+        "sampler": {"type": "independent", "sample_count": 1},
+    }
+
+
+def projector_dict(mi, proj, t_w_p):
+    """Glint's constant-intensity projector (white pattern) at `t_w_p` as Mitsuba's `projector`."""
     if proj.get("pattern") != "white":
         fail(f"projector pattern {proj.get('pattern')!r}: only 'white' is supported")
-    k = cam["intrinsics"]
     kp = proj["intrinsics"]
-    d = {
-        "type": "scene",
-        "integrator": integrator,
-        "sensor": {
-            "type": "perspective",
-            "fov": centred_fov_deg(k, "camera"),
-            "fov_axis": "x",
-            "near_clip": 1e-3,
-            "far_clip": 100.0,
-            "to_world": mi.ScalarTransform4f(flip_xy(cam["t_w_c"]).tolist()),
-            "film": {
-                "type": "hdrfilm",
-                "width": k["width_px"],
-                "height": k["height_px"],
-                "rfilter": {"type": "box"},
-            },
-            "sampler": {"type": "independent", "sample_count": 1},
-        },
-        "projector": {
-            "type": "projector",
-            "fov": centred_fov_deg(kp, "projector"),
-            "fov_axis": "x",
-            "to_world": mi.ScalarTransform4f(flip_xy(proj["t_w_p"]).tolist()),
-            "irradiance": {
-                "type": "bitmap",
-                "bitmap": mi.Bitmap(projector_texture(kp, proj["intensity_w_per_sr"])),
-                "raw": True,
-                "filter_type": "bilinear",
-            },
+    return {
+        "type": "projector",
+        "fov": centred_fov_deg(kp, "projector"),
+        "fov_axis": "x",
+        "to_world": mi.ScalarTransform4f(flip_xy(t_w_p).tolist()),
+        "irradiance": {
+            "type": "bitmap",
+            "bitmap": mi.Bitmap(projector_texture(kp, proj["intensity_w_per_sr"])),
+            "raw": True,
+            "filter_type": "bilinear",
         },
     }
+
+
+def shape_entries(scene, root):
+    """The scene's materials (two-sided principled BSDFs) and PLY shapes as scene-dict entries."""
+    d = {}
     for i, m in enumerate(scene["materials"]):
         p = m["principled"]
         d[f"bsdf_{i}"] = {
@@ -191,6 +219,19 @@ def build_scene(mi, scene, root, integrator):
             "face_normals": True,
             "bsdf": {"type": "ref", "id": f"bsdf_{s['material']}"},
         }
+    return d
+
+
+def build_scene(mi, scene, root, integrator):
+    cam = scene["camera"]
+    proj = scene["projector"]
+    d = {
+        "type": "scene",
+        "integrator": integrator,
+        "sensor": sensor_dict(mi, cam["intrinsics"], cam["t_w_c"], "camera"),
+        "projector": projector_dict(mi, proj, proj["t_w_p"]),
+    }
+    d.update(shape_entries(scene, root))
     return mi.load_dict(d)
 
 
@@ -228,6 +269,7 @@ def main():
         fail(f"{scene_path} not found: run glint bench render --mitsuba-export {root} first")
     scene_json = json.loads(scene_path.read_text())
 
+    point_drjit_at_llvm()
     try:
         import drjit as dr
         import mitsuba as mi

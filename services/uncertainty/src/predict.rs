@@ -216,6 +216,10 @@ pub struct CandidatePrediction {
     pub not_in_view: bool,
     /// The crop of the left image the maps cover.
     pub crop: Option<PixelRect>,
+    /// Column of the right image where the right camera's crop (the left crop's size and
+    /// rows) starts, px; it may lie left of the sensor or reach past its right edge (those
+    /// pixels are not seen).
+    pub right_crop_u_min_px: Option<i64>,
     /// σ̌_z per crop pixel, metres (NaN off the part), when asked.
     pub sigma_z_m: Option<Image<f32>>,
     /// [`PixelCause`] per crop pixel, when asked.
@@ -250,6 +254,7 @@ impl CandidatePrediction {
             counts: MissingCounts::default(),
             not_in_view,
             crop: None,
+            right_crop_u_min_px: None,
             sigma_z_m: None,
             cause: None,
             images: None,
@@ -758,6 +763,7 @@ pub fn predict_candidate(
         counts,
         not_in_view: counts.part_pixels == 0,
         crop: Some(crop),
+        right_crop_u_min_px: Some(right_u0),
         sigma_z_m,
         cause,
         images,

@@ -3,12 +3,13 @@
 //! thread and on all cores.
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glint_estimation::nbv::{PosePrior, plan_next_view};
 use glint_eval::active::{ActiveScene, ActiveSceneSpec, Calibration, prediction_object, set_up};
 use glint_geometry::Part;
+use glint_geometry::image::PixelRect;
 use glint_geometry::io::write_file_atomically;
 use glint_orchestrator::local::SdfCache;
 use glint_orchestrator::stages::PredictionObject;
@@ -34,6 +35,11 @@ pub struct NbvBenchArgs {
     /// Also write the table as CSV here.
     #[arg(long)]
     pub csv: Option<PathBuf>,
+    /// Also export the decision's scene, candidates, crops and times to this folder for
+    /// `services/render/scripts/mitsuba_nbv_bench.py`, which renders the same images with
+    /// Mitsuba 3 and prints the time ratio.
+    #[arg(long)]
+    pub mitsuba_export: Option<PathBuf>,
 }
 
 /// One decision, milliseconds: per stage the sum over the candidates of each one's own time
@@ -91,7 +97,9 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
         window_radius_px: object.window_radius_px,
         ..PredictionSettings::default()
     };
-    let decide = || -> anyhow::Result<DecisionTimes> {
+    // Each candidate's crops (left crop, right crop's first column), for the export.
+    type Crops = Vec<(Option<PixelRect>, Option<i64>)>;
+    let decide = || -> anyhow::Result<(DecisionTimes, Crops)> {
         let started = Instant::now();
         let mut times = DecisionTimes::default();
         // As the workers do: candidates in parallel.
@@ -110,7 +118,9 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
             })
             .collect::<Result<_, _>>()?;
         let mut informations = Vec::with_capacity(predictions.len());
+        let mut crops = Vec::with_capacity(predictions.len());
         for p in predictions {
+            crops.push((p.crop, p.right_crop_u_min_px));
             times.render_ms += p.render_ms;
             times.sigma_ms += p.sigma_ms;
             times.fim_ms += p.information_ms;
@@ -120,13 +130,15 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
         plan_next_view(&Matrix6::zeros(), &informations, &[], &PosePrior::default())?;
         times.entropy_ms = t.elapsed().as_secs_f64() * 1e3;
         times.total_ms = started.elapsed().as_secs_f64() * 1e3;
-        Ok(times)
+        Ok((times, crops))
     };
     let all = rayon::current_num_threads();
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     // A warm-up decision: caches, page faults.
     decide()?;
-    let rows = [(1, one.install(decide)?), (all, decide()?)];
+    let (one_thread, _) = one.install(decide)?;
+    let (all_threads, crops) = decide()?;
+    let rows = [(1, one_thread), (all, all_threads)];
     let mut table = format!(
         "One NBV decision on the {} ({} in the bin, {}×{} px, bin rendered: {}): {} candidates \
          predicted (render, σ̌_z, FIM), then the entropy plan.\n\n\
@@ -162,5 +174,84 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.csv {
         write_file_atomically(path, csv.as_bytes())?;
     }
+    if let Some(dir) = &args.mitsuba_export {
+        let glint_times = rows
+            .iter()
+            .map(|(threads, t)| {
+                serde_json::json!({
+                    "threads": threads, "render_ms": t.render_ms, "sigma_ms": t.sigma_ms,
+                    "fim_ms": t.fim_ms, "entropy_ms": t.entropy_ms, "total_ms": t.total_ms,
+                })
+            })
+            .collect();
+        let path = export_decision(dir, &scene, &object, &settings, &crops, glint_times)?;
+        println!(
+            "wrote {}; next: python3 services/render/scripts/mitsuba_nbv_bench.py {}",
+            path.display(),
+            dir.display()
+        );
+    }
     Ok(())
+}
+
+/// The decision's prediction scene (the part at the hypothesis pose, the known surroundings),
+/// its candidates and their crops as [`crate::mitsuba_export::write_nbv`] writes them.
+fn export_decision(
+    dir: &Path,
+    scene: &ActiveScene,
+    object: &PredictionObject,
+    settings: &PredictionSettings,
+    crops: &[(Option<PixelRect>, Option<i64>)],
+    glint_times: Vec<serde_json::Value>,
+) -> anyhow::Result<PathBuf> {
+    use crate::mitsuba_export::{ExportShape, NbvExport, NbvExportCandidate, write_nbv};
+    use glint_render::integrator::LightTransport;
+    use glint_render::projector::Pattern;
+
+    // Labels as the prediction gives them: the part 1, the surroundings 2, 3, …
+    let mut shapes = vec![ExportShape {
+        name: object.object.name.clone(),
+        mesh_w: object.object.mesh.transformed(&scene.initial_t_w_o.cast()),
+        material: "part",
+        label: 1,
+    }];
+    let mut materials = vec![("part", object.material)];
+    let names: Vec<String> = (0..object.surroundings.len())
+        .map(|i| format!("surrounding_{i}"))
+        .collect();
+    for (i, surface) in object.surroundings.iter().enumerate() {
+        shapes.push(ExportShape {
+            name: names[i].clone(),
+            mesh_w: surface.mesh.transformed(&surface.t_w_s.cast()),
+            material: &names[i],
+            label: i as u16 + 2,
+        });
+        materials.push((&names[i], surface.material));
+    }
+    let candidates = scene
+        .candidates
+        .iter()
+        .zip(crops)
+        .map(
+            |(t_w_c, &(left_crop, right_crop_u_min_px))| NbvExportCandidate {
+                cameras: object.rig.cameras(t_w_c),
+                t_w_p: object.rig.projector(t_w_c, Pattern::White).t_w_p,
+                left_crop,
+                right_crop_u_min_px,
+            },
+        )
+        .collect();
+    let projector = object.rig.projector(&scene.candidates[0], Pattern::White);
+    write_nbv(
+        dir,
+        &NbvExport {
+            shapes,
+            materials,
+            projector: &projector,
+            candidates,
+            samples_per_pixel: settings.samples_per_pixel,
+            multi_path: LightTransport::MULTI_PATH_DEFAULT,
+            glint_times,
+        },
+    )
 }
