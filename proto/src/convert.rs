@@ -15,18 +15,20 @@
 //! | `v1::DepthMap`          | `glint_geometry::image::DepthMap`           |
 //! | `v1::LengthUnit`        | `glint_geometry::LengthUnit`                |
 //! | `v1::MeshFile`          | `glint_geometry::io::LoadedMesh` (one way)  |
+//! | `v1::PrincipledMaterial`| `glint_render::bsdf::PrincipledParams<f32>` |
 //!
 //! What is rejected: missing required sub-messages, NaN or infinite numbers (pose, intrinsics,
 //! baseline, float32 image samples, float32 depth other than the NaN "missing" marker),
 //! quaternions whose norm is off 1 by more than [`UNIT_QUATERNION_TOLERANCE`], zero-size or
 //! out-of-range image sizes, byte buffers of the wrong length, unspecified or unknown enum
-//! values, an image encoding other than the requested sample type's (no silent conversion), and
+//! values, material parameters outside [0, 1], an image encoding other than the requested sample type's (no silent conversion), and
 //! a uint16 depth scale that is not positive.
 
 use glint_geometry::LengthUnit;
 use glint_geometry::camera::{CameraError, PinholeIntrinsics, StereoRig};
 use glint_geometry::image::{DepthMap, Image};
 use glint_geometry::io::{LoadedMesh, MeshFormat, read_mesh_from_bytes};
+use glint_render::bsdf::PrincipledParams;
 use nalgebra::{Isometry3, Matrix6, Quaternion, Translation3, UnitQuaternion};
 
 use crate::v1;
@@ -72,6 +74,27 @@ impl From<ConversionError> for tonic::Status {
     fn from(e: ConversionError) -> Self {
         tonic::Status::invalid_argument(e.to_string())
     }
+}
+
+/// The by-value conversion of a type whose by-reference one is written out: a message is only
+/// read, so taking it by value just forwards. `try WIRE => CORE` for decoding, `CORE => WIRE`
+/// for encoding.
+macro_rules! by_value {
+    (try $wire:ty => $core:ty) => {
+        impl TryFrom<$wire> for $core {
+            type Error = ConversionError;
+            fn try_from(msg: $wire) -> Result<Self, Self::Error> {
+                Self::try_from(&msg)
+            }
+        }
+    };
+    ($core:ty => $wire:ty) => {
+        impl From<$core> for $wire {
+            fn from(value: $core) -> Self {
+                Self::from(&value)
+            }
+        }
+    };
 }
 
 fn finite(field: &str, value: f64) -> Result<f64, ConversionError> {
@@ -138,12 +161,7 @@ impl TryFrom<&v1::Pose> for Isometry3<f64> {
     }
 }
 
-impl TryFrom<v1::Pose> for Isometry3<f64> {
-    type Error = ConversionError;
-    fn try_from(pose: v1::Pose) -> Result<Self, Self::Error> {
-        Self::try_from(&pose)
-    }
-}
+by_value!(try v1::Pose => Isometry3<f64>);
 
 impl From<&Isometry3<f64>> for v1::Pose {
     /// A pose without frame names; see [`v1::Pose::with_frames`].
@@ -168,11 +186,7 @@ impl From<&Isometry3<f64>> for v1::Pose {
     }
 }
 
-impl From<Isometry3<f64>> for v1::Pose {
-    fn from(t: Isometry3<f64>) -> Self {
-        Self::from(&t)
-    }
-}
+by_value!(Isometry3<f64> => v1::Pose);
 
 impl v1::Pose {
     /// `t_a_b` with its frame names: `parent_frame` is a, `child_frame` is b.
@@ -215,12 +229,7 @@ impl TryFrom<&v1::PinholeIntrinsics> for PinholeIntrinsics {
     }
 }
 
-impl TryFrom<v1::PinholeIntrinsics> for PinholeIntrinsics {
-    type Error = ConversionError;
-    fn try_from(k: v1::PinholeIntrinsics) -> Result<Self, Self::Error> {
-        Self::try_from(&k)
-    }
-}
+by_value!(try v1::PinholeIntrinsics => PinholeIntrinsics);
 
 impl From<&PinholeIntrinsics> for v1::PinholeIntrinsics {
     fn from(k: &PinholeIntrinsics) -> Self {
@@ -235,11 +244,7 @@ impl From<&PinholeIntrinsics> for v1::PinholeIntrinsics {
     }
 }
 
-impl From<PinholeIntrinsics> for v1::PinholeIntrinsics {
-    fn from(k: PinholeIntrinsics) -> Self {
-        Self::from(&k)
-    }
-}
+by_value!(PinholeIntrinsics => v1::PinholeIntrinsics);
 
 impl TryFrom<&v1::StereoRig> for StereoRig {
     type Error = ConversionError;
@@ -253,12 +258,7 @@ impl TryFrom<&v1::StereoRig> for StereoRig {
     }
 }
 
-impl TryFrom<v1::StereoRig> for StereoRig {
-    type Error = ConversionError;
-    fn try_from(rig: v1::StereoRig) -> Result<Self, Self::Error> {
-        Self::try_from(&rig)
-    }
-}
+by_value!(try v1::StereoRig => StereoRig);
 
 impl From<&StereoRig> for v1::StereoRig {
     fn from(rig: &StereoRig) -> Self {
@@ -269,11 +269,7 @@ impl From<&StereoRig> for v1::StereoRig {
     }
 }
 
-impl From<StereoRig> for v1::StereoRig {
-    fn from(rig: StereoRig) -> Self {
-        Self::from(&rig)
-    }
-}
+by_value!(StereoRig => v1::StereoRig);
 
 // ---------------------------------------------------------------------------------------------
 // Images
@@ -471,19 +467,9 @@ impl TryFrom<v1::Image> for Image<u8> {
     }
 }
 
-impl TryFrom<v1::Image> for Image<u16> {
-    type Error = ConversionError;
-    fn try_from(msg: v1::Image) -> Result<Self, Self::Error> {
-        Self::try_from(&msg)
-    }
-}
+by_value!(try v1::Image => Image<u16>);
 
-impl TryFrom<v1::Image> for Image<f32> {
-    type Error = ConversionError;
-    fn try_from(msg: v1::Image) -> Result<Self, Self::Error> {
-        Self::try_from(&msg)
-    }
-}
+by_value!(try v1::Image => Image<f32>);
 
 // ---------------------------------------------------------------------------------------------
 // Depth maps
@@ -569,12 +555,7 @@ impl TryFrom<&v1::DepthMap> for DepthMap {
     }
 }
 
-impl TryFrom<v1::DepthMap> for DepthMap {
-    type Error = ConversionError;
-    fn try_from(msg: v1::DepthMap) -> Result<Self, Self::Error> {
-        Self::try_from(&msg)
-    }
-}
+by_value!(try v1::DepthMap => DepthMap);
 
 impl From<&DepthMap> for v1::DepthMap {
     /// Lossless float32 metres. Infinite or negative depths, which the core type treats as
@@ -591,11 +572,7 @@ impl From<&DepthMap> for v1::DepthMap {
     }
 }
 
-impl From<DepthMap> for v1::DepthMap {
-    fn from(depth: DepthMap) -> Self {
-        Self::from(&depth)
-    }
-}
+by_value!(DepthMap => v1::DepthMap);
 
 impl v1::DepthMap {
     /// The BOP-style uint16 encoding of `depth` (half the bytes of float32): each valid depth
@@ -778,6 +755,60 @@ impl From<&Matrix6<f64>> for v1::SymmetricMatrix6 {
         v1::SymmetricMatrix6 { upper }
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Materials
+
+impl TryFrom<&v1::PrincipledMaterial> for PrincipledParams<f32> {
+    type Error = ConversionError;
+    /// Every parameter must be finite and in [0, 1]; the error names the first that is not.
+    fn try_from(m: &v1::PrincipledMaterial) -> Result<Self, Self::Error> {
+        let values = [
+            m.base_color,
+            m.metallic,
+            m.roughness,
+            m.specular,
+            m.spec_tint,
+            m.anisotropic,
+            m.sheen,
+            m.sheen_tint,
+            m.clearcoat,
+            m.clearcoat_gloss,
+        ];
+        // Checked in f64, before the narrowing cast could round a value into range.
+        let names = PrincipledParams::<f32>::NAMES;
+        if let Some((name, value)) = names
+            .iter()
+            .zip(values)
+            .find(|(_, v)| !(0.0..=1.0).contains(v))
+        {
+            return Err(ConversionError::new(
+                *name,
+                format!("{value} must be a finite number in [0, 1]"),
+            ));
+        }
+        Ok(PrincipledParams::from_array(values.map(|v| v as f32)))
+    }
+}
+by_value!(try v1::PrincipledMaterial => PrincipledParams<f32>);
+
+impl From<&PrincipledParams<f32>> for v1::PrincipledMaterial {
+    fn from(p: &PrincipledParams<f32>) -> Self {
+        v1::PrincipledMaterial {
+            base_color: f64::from(p.base_color),
+            metallic: f64::from(p.metallic),
+            roughness: f64::from(p.roughness),
+            specular: f64::from(p.specular),
+            spec_tint: f64::from(p.spec_tint),
+            anisotropic: f64::from(p.anisotropic),
+            sheen: f64::from(p.sheen),
+            sheen_tint: f64::from(p.sheen_tint),
+            clearcoat: f64::from(p.clearcoat),
+            clearcoat_gloss: f64::from(p.clearcoat_gloss),
+        }
+    }
+}
+by_value!(PrincipledParams<f32> => v1::PrincipledMaterial);
 
 #[cfg(test)]
 mod tests {

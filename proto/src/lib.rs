@@ -5,9 +5,9 @@
 //!   `common.proto` (poses, cameras, images, depth, chunked arrays, 6×6 matrices) and one file
 //!   per service — `camera.proto` (`CameraService`, `MockCameraService`), `calibration.proto`,
 //!   `uncertainty.proto` (the render worker), `estimation.proto`, `orchestrator.proto`.
-//! - [`convert`]: `TryFrom<message>` for the core types of `glint-geometry` (validating; every
-//!   rejection is a [`ConversionError`] naming the offending field) and `From<core>` for the
-//!   messages. A [`ConversionError`] converts into `tonic::Status::invalid_argument`.
+//! - [`convert`]: `TryFrom<message>` for the core types of `glint-geometry` and the principled
+//!   material of `glint-render` (validating; every rejection is a [`ConversionError`] naming
+//!   the offending field) and `From<core>` for the messages. A [`ConversionError`] converts into `tonic::Status::invalid_argument`.
 //!
 //! Conventions are those of `shared/DESIGN.md`: metres and radians unless a field name says
 //! otherwise, `t_a_b` maps points from frame b to frame a, row-major images with pixel centres

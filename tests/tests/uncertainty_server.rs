@@ -18,9 +18,7 @@ use glint_geometry::{LengthUnit, Part};
 use glint_proto::v1;
 use glint_proto::v1::uncertainty_service_client::UncertaintyServiceClient;
 use glint_render::rig::SliRig;
-use glint_uncertainty::server::{
-    SERVICE_NAME, Uncertainty, material_to_message, noise_to_message, rig_to_message,
-};
+use glint_uncertainty::server::{SERVICE_NAME, Uncertainty, noise_to_message, rig_to_message};
 use glint_uncertainty::{
     CalibratedCamera, PredictionSettings, PredictorObject, candidate_seed, predict_candidate,
 };
@@ -64,7 +62,7 @@ fn fixture() -> Fixture {
             unit: v1::LengthUnit::Millimetre as i32,
             name: "zigzag".into(),
         }),
-        material: Some(material_to_message(&params)),
+        material: Some(v1::PrincipledMaterial::from(&params)),
         response: Some(response_to_message(&response)),
         rig: Some(rig_to_message(&rig, 255, EXPOSURE_S)),
         radiometric_scale: scale,

@@ -5,42 +5,29 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{glint, printed as text};
+use common::{argv, glint, printed as text};
 
 #[test]
 fn response_from_a_captured_stack_matches_the_hidden_curve() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("scene");
-    let o = glint(&[
-        "capture",
-        "--part",
-        "gear",
-        "--instances",
-        "4",
-        "--views",
-        "1",
-        "--resolution",
-        "320x256",
-        "--spp",
-        "2",
-        "--exposure-stack",
-        "--out",
-        scene.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "capture --part gear --instances 4 --views 1 --resolution 320x256 \
+        --spp 2 --exposure-stack --out {}",
+        &[scene.to_str().unwrap()],
+    ));
     assert!(o.status.success(), "{}", text(&o));
     let stack = scene.join("test/000001/glint/exposure_stack/000000");
     let g = dir.path().join("g.json");
     let plot = dir.path().join("g.png");
-    let o = glint(&[
-        "calibrate",
-        "response",
-        "--stack",
-        stack.to_str().unwrap(),
-        "--out",
-        g.to_str().unwrap(),
-        "--plot",
-        plot.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "calibrate response --stack {} --out {} --plot {}",
+        &[
+            stack.to_str().unwrap(),
+            g.to_str().unwrap(),
+            plot.to_str().unwrap(),
+        ],
+    ));
     assert!(o.status.success(), "{}", text(&o));
     assert!(plot.exists());
     let json: serde_json::Value =
@@ -49,14 +36,10 @@ fn response_from_a_captured_stack_matches_the_hidden_curve() {
 
     // Evaluation against the simulator's hidden response (the calibration never read it).
     let gt = scene.join("test/000001/glint/gt_sensor.json");
-    let o = glint(&[
-        "calibrate",
-        "eval-response",
-        "--response",
-        g.to_str().unwrap(),
-        "--gt-sensor",
-        gt.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "calibrate eval-response --response {} --gt-sensor {}",
+        &[g.to_str().unwrap(), gt.to_str().unwrap()],
+    ));
     let out = text(&o);
     assert!(o.status.success(), "{out}");
     let max_err: f64 = out
@@ -76,14 +59,10 @@ fn response_of_a_missing_stack_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("no_such_stack");
     let out = dir.path().join("g.json");
-    let o = glint(&[
-        "calibrate",
-        "response",
-        "--stack",
-        missing.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "calibrate response --stack {} --out {}",
+        &[missing.to_str().unwrap(), out.to_str().unwrap()],
+    ));
     let err = text(&o);
     assert_eq!(o.status.code(), Some(1), "{err}");
     assert!(
@@ -109,25 +88,11 @@ fn number_after(out: &str, key: &str) -> f64 {
 /// `glint capture --exposure-stack` of four `part`s into `dir/capture`.
 fn capture(dir: &Path, part: &str, views: &str, resolution: &str, spp: &str) -> PathBuf {
     let out = dir.join("capture");
-    let o = glint(&[
-        "capture",
-        "--part",
-        part,
-        "--instances",
-        "4",
-        "--views",
-        views,
-        "--resolution",
-        resolution,
-        "--spp",
-        spp,
-        "--exposure-stack",
-        "0.25,0.5,1,2,4,8,16,32,64",
-        "--seed",
-        "3",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "capture --part {} --instances 4 --views {} --resolution {} --spp \
+        {} --exposure-stack 0.25,0.5,1,2,4,8,16,32,64 --seed 3 --out {}",
+        &[part, views, resolution, spp, out.to_str().unwrap()],
+    ));
     assert!(o.status.success(), "{}", text(&o));
     out
 }
@@ -157,14 +122,10 @@ fn calibrate_bsdf(
 fn response_of(dir: &Path, capture: &Path) -> PathBuf {
     let g = dir.join("g.json");
     let stack = capture.join("test/000001/glint/exposure_stack/000000");
-    let o = glint(&[
-        "calibrate",
-        "response",
-        "--stack",
-        stack.to_str().unwrap(),
-        "--out",
-        g.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "calibrate response --stack {} --out {}",
+        &[stack.to_str().unwrap(), g.to_str().unwrap()],
+    ));
     assert!(o.status.success(), "{}", text(&o));
     g
 }
@@ -249,14 +210,13 @@ fn bsdf_fit_on_a_captured_zigzag_recovers_its_material() {
 
     // Evaluation (reads the capture's ground truth): the fitted material rendered from the
     // held-out view 1 against the hidden one, both with the same samples.
-    let o = glint(&[
-        "calibrate",
-        "eval-bsdf",
-        "--scene",
-        capture.join("test/000001").to_str().unwrap(),
-        "--material",
-        material.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "calibrate eval-bsdf --scene {} --material {}",
+        &[
+            capture.join("test/000001").to_str().unwrap(),
+            material.to_str().unwrap(),
+        ],
+    ));
     let out = text(&o);
     assert!(o.status.success(), "{out}");
     let held_out = number_after(
@@ -351,14 +311,10 @@ fn bad_calibration_inputs_are_clear_errors_without_output() {
     )
     .unwrap();
     let eval = |material: &Path| {
-        glint(&[
-            "calibrate",
-            "eval-bsdf",
-            "--scene",
-            capture.to_str().unwrap(),
-            "--material",
-            material.to_str().unwrap(),
-        ])
+        glint(argv(
+            "calibrate eval-bsdf --scene {} --material {}",
+            &[capture.to_str().unwrap(), material.to_str().unwrap()],
+        ))
     };
     fails_with(eval(&material), &["hand_made.json", "roughness"]);
     params["roughness"] = serde_json::json!(0.2);
@@ -383,7 +339,7 @@ fn fit_over_grpc(
 ) {
     use glint_proto::v1;
     use glint_proto::v1::calibration_service_client::CalibrationServiceClient;
-    let server = common::serve(&["calibration", "--listen", "127.0.0.1:0"]);
+    let server = common::serve(argv("calibration --listen 127.0.0.1:0", &[]));
     let table = glint_calibration::response::ResponseTable::load(response).unwrap();
     let request = v1::FitBsdfRequest {
         scene_dir: capture.to_string_lossy().into_owned(),

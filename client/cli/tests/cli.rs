@@ -1,14 +1,11 @@
 //! The `glint` binary as a user runs it: exit codes, files written, messages on bad input.
 
-use std::path::Path;
-use std::process::{Command, Output};
+mod common;
 
-fn glint(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_glint"))
-        .args(args)
-        .output()
-        .expect("the glint binary runs")
-}
+use std::path::Path;
+use std::process::Output;
+
+use common::{argv, glint};
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
@@ -29,29 +26,18 @@ fn export_then_info_round_trips_every_part() {
     for part in ["eye-bolt", "tube-fitting", "chrome-screw", "gear", "zigzag"] {
         let ply = dir.path().join(format!("{part}.ply"));
         let png = dir.path().join(format!("{part}.png"));
-        let o = glint(&[
-            "mesh",
-            "export",
-            "--part",
-            part,
-            "--out",
-            ply.to_str().unwrap(),
-            "--preview",
-            png.to_str().unwrap(),
-        ]);
+        let o = glint(argv(
+            "mesh export --part {} --out {} --preview {}",
+            &[part, ply.to_str().unwrap(), png.to_str().unwrap()],
+        ));
         assert!(o.status.success(), "{part}: {}", stderr(&o));
         let preview = image::open(&png).unwrap();
         assert_eq!((preview.width(), preview.height()), (512, 512));
 
-        let o = glint(&[
-            "mesh",
-            "info",
-            ply.to_str().unwrap(),
-            "--unit",
-            "mm",
-            "--format",
-            "json",
-        ]);
+        let o = glint(argv(
+            "mesh info {} --unit mm --format json",
+            &[ply.to_str().unwrap()],
+        ));
         assert!(o.status.success(), "{part}: {}", stderr(&o));
         let info: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         assert_eq!(info["watertight"], true, "{part}: {info}");
@@ -76,7 +62,7 @@ fn bad_input_gets_a_clear_error_and_no_output() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("missing.ply");
     let err = fails_cleanly(
-        &glint(&["mesh", "info", missing.to_str().unwrap(), "--unit", "mm"]),
+        &glint(argv("mesh info {} --unit mm", &[missing.to_str().unwrap()])),
         1,
     );
     assert!(err.contains("missing.ply"), "{err}");
@@ -88,33 +74,32 @@ fn bad_input_gets_a_clear_error_and_no_output() {
     )
     .unwrap();
     let err = fails_cleanly(
-        &glint(&["mesh", "info", garbage.to_str().unwrap(), "--unit", "mm"]),
+        &glint(argv("mesh info {} --unit mm", &[garbage.to_str().unwrap()])),
         1,
     );
     assert!(err.contains("garbage.stl"), "{err}");
 
     // clap's usage errors exit with 2 and list what is valid.
     let err = fails_cleanly(
-        &glint(&["mesh", "export", "--part", "sprocket", "--out", "x.ply"]),
+        &glint(argv("mesh export --part sprocket --out x.ply", &[])),
         2,
     );
     assert!(err.contains("chrome-screw"), "{err}");
     let err = fails_cleanly(
-        &glint(&["mesh", "info", garbage.to_str().unwrap(), "--unit", "inch"]),
+        &glint(argv(
+            "mesh info {} --unit inch",
+            &[garbage.to_str().unwrap()],
+        )),
         2,
     );
     assert!(err.contains("mm"), "{err}");
 
     let nowhere = dir.path().join("no/such/dir/gear.ply");
     let err = fails_cleanly(
-        &glint(&[
-            "mesh",
-            "export",
-            "--part",
-            "gear",
-            "--out",
-            nowhere.to_str().unwrap(),
-        ]),
+        &glint(argv(
+            "mesh export --part gear --out {}",
+            &[nowhere.to_str().unwrap()],
+        )),
         1,
     );
     assert!(err.contains("does not exist"), "{err}");
@@ -126,23 +111,11 @@ fn capture_writes_a_bop_scene_that_reads_back() {
     use glint_camera::dataset::bop::BopSceneReader;
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cap");
-    let o = glint(&[
-        "capture",
-        "--part",
-        "gear",
-        "--instances",
-        "3",
-        "--views",
-        "2",
-        "--seed",
-        "5",
-        "--resolution",
-        "320x256",
-        "--spp",
-        "1",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "capture --part gear --instances 3 --views 2 --seed 5 \
+        --resolution 320x256 --spp 1 --out {}",
+        &[out.to_str().unwrap()],
+    ));
     assert!(o.status.success(), "{}", stderr(&o));
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("missing depth"), "{report}");
@@ -201,15 +174,7 @@ fn capture_writes_a_bop_scene_that_reads_back() {
     }
 
     let err = fails_cleanly(
-        &glint(&[
-            "capture",
-            "--part",
-            "gear",
-            "--resolution",
-            "12x7",
-            "--out",
-            "x",
-        ]),
+        &glint(argv("capture --part gear --resolution 12x7 --out x", &[])),
         2,
     );
     assert!(err.contains("64 to 8192"), "{err}");
@@ -222,23 +187,11 @@ fn capture_exposure_stack_writes_the_calibration_layout() {
     use glint_camera::dataset::rig_file::{read_gt_sensor_json, read_rig_json};
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("stack");
-    let o = glint(&[
-        "capture",
-        "--part",
-        "gear",
-        "--instances",
-        "3",
-        "--views",
-        "1",
-        "--resolution",
-        "160x128",
-        "--spp",
-        "1",
-        "--exposure-stack",
-        "4,0.5,1",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "capture --part gear --instances 3 --views 1 --resolution 160x128 \
+        --spp 1 --exposure-stack 4,0.5,1 --out {}",
+        &[out.to_str().unwrap()],
+    ));
     assert!(o.status.success(), "{}", stderr(&o));
     let scene_dir = out.join("test/000001");
     let stack = ExposureStackFiles::read(scene_dir.join("glint/exposure_stack/000000")).unwrap();
@@ -284,15 +237,10 @@ fn capture_exposure_stack_writes_the_calibration_layout() {
     assert_eq!((mask.width(), mask.height()), (160, 128));
 
     let err = fails_cleanly(
-        &glint(&[
-            "capture",
-            "--part",
-            "gear",
-            "--exposure-stack",
-            "1",
-            "--out",
-            out.to_str().unwrap(),
-        ]),
+        &glint(argv(
+            "capture --part gear --exposure-stack 1 --out {}",
+            &[out.to_str().unwrap()],
+        )),
         2,
     );
     assert!(err.contains("at least 2"), "{err}");
@@ -304,20 +252,11 @@ fn render_bench_exports_a_scene_for_mitsuba() {
     use glint_geometry::io::read_mesh;
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("mitsuba");
-    let o = glint(&[
-        "bench",
-        "render",
-        "--part",
-        "zigzag",
-        "--instances",
-        "2",
-        "--mitsuba-export",
-        out.to_str().unwrap(),
-        "--export-resolution",
-        "128x96",
-        "--export-spp",
-        "1",
-    ]);
+    let o = glint(argv(
+        "bench render --part zigzag --instances 2 --mitsuba-export {} \
+        --export-resolution 128x96 --export-spp 1",
+        &[out.to_str().unwrap()],
+    ));
     assert!(o.status.success(), "{}", stderr(&o));
     let scene: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("scene.json")).unwrap()).unwrap();
@@ -377,28 +316,12 @@ fn refine_bench_prints_its_table_writes_csv_and_exports_problems() {
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("refine.csv");
     let export = dir.path().join("export");
-    let o = glint(&[
-        "bench",
-        "refine",
-        "--part",
-        "gear",
-        "--points",
-        "300",
-        "--views",
-        "1,2",
-        "--threads",
-        "1",
-        "--iterations",
-        "15",
-        "--repeats",
-        "1",
-        "--model-samples",
-        "3000",
-        "--csv",
-        csv.to_str().unwrap(),
-        "--export",
-        export.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "bench refine --part gear --points 300 --views 1,2 --threads 1 \
+        --iterations 15 --repeats 1 --model-samples 3000 --csv {} \
+        --export {}",
+        &[csv.to_str().unwrap(), export.to_str().unwrap()],
+    ));
     assert!(o.status.success(), "{}", stderr(&o));
     let stdout = String::from_utf8_lossy(&o.stdout);
     // Header, separator and one row per view count and method.
@@ -460,22 +383,11 @@ fn nbv_bench_exports_its_candidates_and_crops_for_mitsuba() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("nbv");
     let csv = dir.path().join("nbv.csv");
-    let o = glint(&[
-        "bench",
-        "nbv",
-        "--part",
-        "zigzag",
-        "--candidates",
-        "3",
-        "--instances",
-        "3",
-        "--resolution",
-        "320x256",
-        "--csv",
-        csv.to_str().unwrap(),
-        "--mitsuba-export",
-        out.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "bench nbv --part zigzag --candidates 3 --instances 3 \
+        --resolution 320x256 --csv {} --mitsuba-export {}",
+        &[csv.to_str().unwrap(), out.to_str().unwrap()],
+    ));
     assert!(o.status.success(), "{}", stderr(&o));
     let csv = std::fs::read_to_string(&csv).unwrap();
     assert!(csv.starts_with("threads,candidates,render_ms,sigma_ms,fim_ms,entropy_ms,total_ms\n"));

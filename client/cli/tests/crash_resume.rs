@@ -8,6 +8,8 @@
 
 mod common;
 
+use common::argv;
+
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
@@ -133,7 +135,7 @@ async fn run(addr: &str, id: &str) -> (Vec<v1::SessionStep>, Option<v1::Session>
 #[test]
 fn a_session_killed_during_capture_refine_and_fan_out_resumes_with_nothing_lost_or_repeated() {
     let rt = runtime();
-    let stages = common::serve(&["all", "--listen", "127.0.0.1:0"]);
+    let stages = common::serve(argv("all --listen 127.0.0.1:0", &[]));
     let spec = MockSession {
         part: Part::Zigzag,
         instances: 4,
@@ -285,20 +287,11 @@ fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
 fn a_damaged_state_directory_stops_the_server_with_what_to_do() {
     let state = tempfile::tempdir().unwrap();
     std::fs::write(state.path().join("sessions.redb"), b"not a database at all").unwrap();
-    let out = common::glint(&[
-        "serve",
-        "orchestrator",
-        "--listen",
-        "127.0.0.1:0",
-        "--camera",
-        "127.0.0.1:9",
-        "--estimation",
-        "127.0.0.1:9",
-        "--workers",
-        "127.0.0.1:9",
-        "--state",
-        state.path().to_str().unwrap(),
-    ]);
+    let out = common::glint(argv(
+        "serve orchestrator --listen 127.0.0.1:0 --camera 127.0.0.1:9 \
+        --estimation 127.0.0.1:9 --workers 127.0.0.1:9 --state {}",
+        &[state.path().to_str().unwrap()],
+    ));
     assert!(!out.status.success());
     let said = common::printed(&out);
     assert!(said.contains("sessions.redb"), "{said}");

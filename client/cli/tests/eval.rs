@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{glint, printed as text};
+use common::{argv, glint, printed as text};
 
 /// `part,views,method` → (n, rate 5/5, rate 2/2).
 fn results(csv: &str) -> std::collections::HashMap<(String, u32, String), (usize, f64, f64)> {
@@ -31,28 +31,11 @@ fn results(csv: &str) -> std::collections::HashMap<(String, u32, String), (usize
 fn eval_refine_writes_auditable_results() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("table");
-    let args = [
-        "eval",
-        "refine",
-        "--parts",
-        "eye-bolt",
-        "--scenes",
-        "1",
-        "--views-per-scene",
-        "2",
-        "--views",
-        "1,2",
-        "--instances",
-        "4",
-        "--spp",
-        "1",
-        "--tune-scenes",
-        "1",
-        "--icp-distances-mm",
-        "5,10",
-        "--out",
-        out.to_str().unwrap(),
-    ];
+    let args = argv(
+        "eval refine --parts eye-bolt --scenes 1 --views-per-scene 2 --views 1,2 --instances 4 \
+        --spp 1 --tune-scenes 1 --icp-distances-mm 5,10 --out {}",
+        &[out.to_str().unwrap()],
+    );
     let o = glint(&args);
     assert!(o.status.success(), "{}", text(&o));
     let rows = results(&std::fs::read_to_string(out.join("results.csv")).unwrap());
@@ -166,7 +149,7 @@ fn eval_refine_rejects_bad_arguments_before_writing() {
 fn eval_initial_poses_rejects_a_ratio_it_cannot_fit_at() {
     for ratio in ["0", "-2", "nan"] {
         let flag = format!("--depth-to-lateral={ratio}");
-        let o = glint(&["eval", "initial-poses", "--samples", "100", &flag]);
+        let o = glint(argv("eval initial-poses --samples 100 {}", &[&flag]));
         let err = text(&o);
         assert_ne!(o.status.code(), Some(0), "{ratio}: {err}");
         assert!(
@@ -180,18 +163,10 @@ fn eval_initial_poses_rejects_a_ratio_it_cannot_fit_at() {
 fn eval_uncertainty_writes_the_scatter() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("unc");
-    let o = glint(&[
-        "eval",
-        "uncertainty",
-        "--part",
-        "gear",
-        "--repeats",
-        "4",
-        "--spp",
-        "1",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "eval uncertainty --part gear --repeats 4 --spp 1 --out {}",
+        &[out.to_str().unwrap()],
+    ));
     assert!(o.status.success(), "{}", text(&o));
     let csv = std::fs::read_to_string(out.join("scatter.csv")).unwrap();
     let values: Vec<(f64, f64)> = csv
@@ -220,45 +195,19 @@ fn eval_uncertainty_writes_the_scatter() {
 fn eval_refine_runs_on_a_user_mesh() {
     let dir = tempfile::tempdir().unwrap();
     let mesh = dir.path().join("bracket.ply");
-    let o = glint(&[
-        "mesh",
-        "export",
-        "--part",
-        "zigzag",
-        "--unit",
-        "mm",
-        "--out",
-        mesh.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "mesh export --part zigzag --unit mm --out {}",
+        &[mesh.to_str().unwrap()],
+    ));
     assert!(o.status.success(), "{}", text(&o));
     let out = dir.path().join("table");
     let run = |symmetry: &str, out: &std::path::Path| {
-        glint(&[
-            "eval",
-            "refine",
-            "--mesh",
-            mesh.to_str().unwrap(),
-            "--unit",
-            "mm",
-            "--symmetry",
-            symmetry,
-            "--scenes",
-            "1",
-            "--views-per-scene",
-            "1",
-            "--views",
-            "1",
-            "--instances",
-            "4",
-            "--spp",
-            "1",
-            "--tune-scenes",
-            "1",
-            "--icp-distances-mm",
-            "10",
-            "--out",
-            out.to_str().unwrap(),
-        ])
+        glint(argv(
+            "eval refine --mesh {} --unit mm --symmetry {} --scenes 1 \
+            --views-per-scene 1 --views 1 --instances 4 --spp 1 \
+            --tune-scenes 1 --icp-distances-mm 10 --out {}",
+            &[mesh.to_str().unwrap(), symmetry, out.to_str().unwrap()],
+        ))
     };
     let o = run("discrete:z:2", &out);
     assert!(o.status.success(), "{}", text(&o));
@@ -365,32 +314,12 @@ fn eval_nbv_rejects_bad_arguments_before_writing() {
 fn eval_nbv_writes_rates_that_follow_from_its_trials() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("fig9");
-    let o = glint(&[
-        "eval",
-        "nbv",
-        "--parts",
-        "zigzag",
-        "--scenes",
-        "1",
-        "--detection-views",
-        "1",
-        "--candidates",
-        "5",
-        "--max-views",
-        "2",
-        "--instances",
-        "3",
-        "--resolution",
-        "320x256",
-        "--spp",
-        "1",
-        "--random-draws",
-        "2",
-        "--min-visib-fract",
-        "0.5",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "eval nbv --parts zigzag --scenes 1 --detection-views 1 \
+        --candidates 5 --max-views 2 --instances 3 --resolution 320x256 \
+        --spp 1 --random-draws 2 --min-visib-fract 0.5 --out {}",
+        &[out.to_str().unwrap()],
+    ));
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     for file in [
         "results.csv",
@@ -474,24 +403,11 @@ fn eval_prediction_rejects_bad_arguments_before_writing() {
 fn eval_prediction_ranks_every_candidate_of_every_bin() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("prediction");
-    let o = glint(&[
-        "eval",
-        "prediction",
-        "--parts",
-        "zigzag",
-        "--scenes",
-        "2",
-        "--candidates",
-        "3",
-        "--instances",
-        "3",
-        "--resolution",
-        "320x256",
-        "--spp",
-        "1",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let o = glint(argv(
+        "eval prediction --parts zigzag --scenes 2 --candidates 3 \
+        --instances 3 --resolution 320x256 --spp 1 --out {}",
+        &[out.to_str().unwrap()],
+    ));
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let csv = std::fs::read_to_string(out.join("prediction.csv")).unwrap();
     let mut lines = csv.lines();

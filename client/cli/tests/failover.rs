@@ -7,6 +7,8 @@ use std::time::{Duration, Instant};
 
 mod common;
 
+use common::argv;
+
 use glint_eval::active::{ActiveSceneSpec, Calibration, prediction_object, set_up};
 use glint_geometry::Part;
 use glint_orchestrator::local::{LocalEstimation, LocalPrediction};
@@ -48,8 +50,8 @@ fn a_decision_survives_a_worker_killed_mid_way_and_a_returning_worker_is_used_ag
         .predict(&object, &request)
         .unwrap();
 
-    let a = common::serve(&["uncertainty", "--listen", "127.0.0.1:0"]);
-    let b = common::serve(&["uncertainty", "--listen", "127.0.0.1:0"]);
+    let a = common::serve(argv("uncertainty --listen 127.0.0.1:0", &[]));
+    let b = common::serve(argv("uncertainty --listen 127.0.0.1:0", &[]));
     let runtime = tokio::runtime::Runtime::new().unwrap();
     let pool = RemotePrediction::new(
         runtime.handle().clone(),
@@ -115,7 +117,7 @@ fn a_decision_survives_a_worker_killed_mid_way_and_a_returning_worker_is_used_ag
 
     // Worker a comes back on its address: the next decision uses it again.
     drop(a);
-    let a = common::serve(&["uncertainty", "--listen", &a_addr]);
+    let a = common::serve(argv("uncertainty --listen {}", &[&a_addr]));
     std::thread::sleep(Duration::from_millis(300)); // past retry_after
     let before = pool
         .stats()
@@ -192,7 +194,7 @@ fn a_decision_without_workers_waits_for_one_and_fails_naming_them_when_none_come
     let answers = std::thread::scope(|s| {
         let decision = s.spawn(|| pool.predict(&object, &request));
         std::thread::sleep(Duration::from_millis(700));
-        let worker = common::serve(&["uncertainty", "--listen", &addr]);
+        let worker = common::serve(argv("uncertainty --listen {}", &[&addr]));
         let answers = decision.join().unwrap();
         drop(worker);
         answers

@@ -5,6 +5,8 @@
 
 mod common;
 
+use common::argv;
+
 use glint_client::{MockSession, run_mock_session};
 use glint_e2e::TestPki;
 use glint_geometry::Part;
@@ -24,19 +26,16 @@ fn a_session_runs_over_tls_with_a_token_and_strangers_are_refused() {
     std::fs::write(&token_file, format!("{TOKEN}\n")).unwrap();
     let path = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
     let token_path = token_file.to_string_lossy().into_owned();
-    let server = common::serve(&[
-        "all",
-        "--listen",
-        "127.0.0.1:0",
-        "--token-file",
-        &token_path,
-        "--tls-cert",
-        &path("server.pem"),
-        "--tls-key",
-        &path("server.key"),
-        "--tls-ca",
-        &path("ca.pem"),
-    ]);
+    let server = common::serve(argv(
+        "all --listen 127.0.0.1:0 --token-file {} --tls-cert {} --tls-key \
+        {} --tls-ca {}",
+        &[
+            &token_path,
+            &path("server.pem"),
+            &path("server.key"),
+            &path("ca.pem"),
+        ],
+    ));
     let tls = ClientTls {
         ca_pem: pki.ca_pem.clone().into_bytes(),
         identity: None,
@@ -93,15 +92,11 @@ fn a_session_runs_over_tls_with_a_token_and_strangers_are_refused() {
     assert_eq!(status.code(), tonic::Code::Unauthenticated, "{status:?}");
 
     // Probes need no token.
-    let probe = common::glint(&[
-        "healthcheck",
-        "--target",
-        &server.addr,
-        "--tls-ca",
-        &path("ca.pem"),
-        "--service",
-        "glint.v1.OrchestratorService",
-    ]);
+    let probe = common::glint(argv(
+        "healthcheck --target {} --tls-ca {} --service \
+        glint.v1.OrchestratorService",
+        &[&server.addr, &path("ca.pem")],
+    ));
     assert!(probe.status.success(), "{}", common::printed(&probe));
 }
 
@@ -109,46 +104,26 @@ fn a_session_runs_over_tls_with_a_token_and_strangers_are_refused() {
 fn bad_security_flags_say_what_is_wrong() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nope.pem").to_string_lossy().into_owned();
-    let cases: [(&[&str], &str); 4] = [
+    // Each command line's `{}` is the missing file.
+    let cases = [
         (
-            &[
-                "serve",
-                "estimation",
-                "--listen",
-                "127.0.0.1:0",
-                "--tls-cert",
-                &missing,
-            ],
+            "serve estimation --listen 127.0.0.1:0 --tls-cert {}",
             "--tls-cert and --tls-key go together",
         ),
         (
-            &[
-                "serve",
-                "estimation",
-                "--listen",
-                "127.0.0.1:0",
-                "--token-file",
-                &missing,
-            ],
+            "serve estimation --listen 127.0.0.1:0 --token-file {}",
             "--token-file",
         ),
         (
-            &[
-                "serve",
-                "all",
-                "--listen",
-                "127.0.0.1:0",
-                "--tls-cert",
-                &missing,
-                "--tls-key",
-                &missing,
-            ],
+            "serve all --listen 127.0.0.1:0 --tls-cert {} --tls-key {}",
             "--tls-cert",
         ),
-        (&["healthcheck", "--tls-cert", &missing], "--tls-ca"),
+        ("healthcheck --tls-cert {}", "--tls-ca"),
     ];
-    for (args, expected) in cases {
-        let out = common::glint(args);
+    for (line, expected) in cases {
+        let values = vec![missing.as_str(); line.matches("{}").count()];
+        let args = argv(line, &values);
+        let out = common::glint(&args);
         assert!(!out.status.success(), "{args:?}");
         let said = common::printed(&out);
         assert!(said.contains(expected), "{args:?}: {said}");

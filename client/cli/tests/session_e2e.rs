@@ -5,6 +5,8 @@
 
 mod common;
 
+use common::argv;
+
 use std::time::Duration;
 
 use glint_client::{MockSession, run_mock_session};
@@ -60,7 +62,7 @@ fn session_on(addr: &str, spec: &MockSession) -> glint_client::RunOutcome {
 
 #[test]
 fn a_session_over_grpc_converges_and_its_pose_error_falls() {
-    let server = common::serve(&["all", "--listen", "127.0.0.1:0"]);
+    let server = common::serve(argv("all --listen 127.0.0.1:0", &[]));
     // Stop once the pose is known to 0.1 mm and 0.1° per axis: a robot's placing tolerance,
     // not a number read off a run.
     let threshold = glint_estimation::nbv::entropy_of_axis_sigmas(0.1e-3, 0.1f64.to_radians());
@@ -143,7 +145,7 @@ async fn start(
 
 #[test]
 fn bad_session_requests_are_refused_naming_the_field() {
-    let server = common::serve(&["all", "--listen", "127.0.0.1:0"]);
+    let server = common::serve(argv("all --listen 127.0.0.1:0", &[]));
     runtime().block_on(async {
         let mut client = OrchestratorServiceClient::new(
             glint_client::channel(&server.addr, &Default::default())
@@ -278,7 +280,7 @@ fn bad_session_requests_are_refused_naming_the_field() {
 fn serve_all_turns_not_serving_when_told_to_stop() {
     use tonic_health::pb::health_check_response::ServingStatus;
     use tonic_health::pb::{HealthCheckRequest, health_client::HealthClient};
-    let mut server = common::serve(&["all", "--listen", "127.0.0.1:0"]);
+    let mut server = common::serve(argv("all --listen 127.0.0.1:0", &[]));
     runtime().block_on(async {
         let channel = glint_client::channel(&server.addr, &Default::default())
             .await
@@ -323,22 +325,11 @@ fn sessions_beyond_the_orchestrators_limit_wait_their_turn_and_all_complete() {
     // others are refused with RESOURCE_EXHAUSTED and a retry hint, wait, and complete. Its
     // stage services take one call at a time: the two running sessions' stage calls are
     // refused when they meet, and the orchestrator waits the hint and calls again.
-    let out = common::glint(&[
-        "bench",
-        "load",
-        "--sessions",
-        "6",
-        "--concurrency",
-        "6",
-        "--max-running",
-        "2",
-        "--max-concurrent-calls",
-        "1",
-        "--policy",
-        "max-distance",
-        "--timeout-s",
-        "300",
-    ]);
+    let out = common::glint(argv(
+        "bench load --sessions 6 --concurrency 6 --max-running 2 \
+        --max-concurrent-calls 1 --policy max-distance --timeout-s 300",
+        &[],
+    ));
     let said = common::printed(&out);
     assert!(out.status.success(), "{said}");
     // The table's row: | sessions | clients | max running | completed | failed | refused | …
@@ -363,31 +354,15 @@ fn the_demo_runs_a_session_through_its_servers_and_writes_its_report() {
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("report");
     // A small bin at a quarter of the resolution, with a quick first calibration.
-    let demo = |more: &[&str]| {
-        let mut args = vec![
-            "demo",
-            "--out",
-            dir.to_str().unwrap(),
-            "--resolution",
-            "320x256",
-            "--spp",
-            "1",
-            "--candidates",
-            "6",
-            "--instances",
-            "3",
-        ];
-        args.extend_from_slice(more);
+    let demo = |more: &str| {
+        let mut args = argv(
+            "demo --out {} --resolution 320x256 --spp 1 --candidates 6 --instances 3",
+            &[dir.to_str().unwrap()],
+        );
+        args.extend(argv(more, &[]));
         common::glint(&args)
     };
-    let run = demo(&[
-        "--max-views",
-        "2",
-        "--calibration-spp",
-        "4",
-        "--calibration-iterations",
-        "10",
-    ]);
+    let run = demo("--max-views 2 --calibration-spp 4 --calibration-iterations 10");
     let said = common::printed(&run);
     assert!(run.status.success(), "{said}");
     assert!(said.contains("Report:"), "{said}");
@@ -414,7 +389,7 @@ fn the_demo_runs_a_session_through_its_servers_and_writes_its_report() {
     assert!(maps >= 1, "no predicted map in the report: {said}");
 
     // The next run reads the cache instead of calibrating again.
-    let again = demo(&["--max-views", "1"]);
+    let again = demo("--max-views 1");
     let said = common::printed(&again);
     assert!(again.status.success(), "{said}");
     assert!(said.contains("Calibration: cached in"), "{said}");

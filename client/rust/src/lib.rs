@@ -13,7 +13,6 @@ use std::time::Duration;
 
 use anyhow::Context;
 use glint_calibration::server::response_to_message;
-use glint_camera::server::material_to_message;
 use glint_eval::active::stand_in_detector;
 use glint_geometry::Part;
 use glint_geometry::pose_deviation::{PoseDeviation, pose_deviation};
@@ -241,7 +240,7 @@ pub async fn prepare_mock_session(
         max_views: spec.max_views,
         entropy_threshold_nats: spec.entropy_threshold_nats,
         seed: spec.seed,
-        material: calibration.map(|c| material_to_message(&c.material)),
+        material: calibration.map(|c| v1::PrincipledMaterial::from(&c.material)),
         response: calibration.map(|c| response_to_message(&c.response)),
         radiometric_scale: calibration.map_or(0.0, |c| c.radiometric_scale),
         ..Default::default()

@@ -16,7 +16,6 @@ use glint_geometry::image::Image;
 use glint_proto::chunks::{ArrayAssembler, AssembledArray};
 use glint_proto::v1;
 use glint_proto::v1::calibration_service_server::{CalibrationService, CalibrationServiceServer};
-use glint_render::bsdf::PrincipledParams;
 use tokio_stream::wrappers::ReceiverStream;
 use tokio_stream::{Stream, StreamExt};
 use tonic::{Request, Response, Status, Streaming};
@@ -73,23 +72,6 @@ pub const DEFAULT_FIT_ITERATIONS: usize = 300;
 pub const MAX_FIT_ITERATIONS: usize = 10_000;
 /// Progress messages buffered for a slow client before the fit waits.
 const FIT_EVENTS_BUFFERED: usize = 16;
-
-/// A principled material as its message (the mirror of glint-camera's `material_to_message`,
-/// which this crate cannot reach).
-fn material_message(p: &PrincipledParams<f32>) -> v1::PrincipledMaterial {
-    v1::PrincipledMaterial {
-        base_color: f64::from(p.base_color),
-        metallic: f64::from(p.metallic),
-        roughness: f64::from(p.roughness),
-        specular: f64::from(p.specular),
-        spec_tint: f64::from(p.spec_tint),
-        anisotropic: f64::from(p.anisotropic),
-        sheen: f64::from(p.sheen),
-        sheen_tint: f64::from(p.sheen_tint),
-        clearcoat: f64::from(p.clearcoat),
-        clearcoat_gloss: f64::from(p.clearcoat_gloss),
-    }
-}
 
 /// A validated FitBsdf request: the capture folder, the response, the fit's settings
 /// (the library's defaults, which are `glint calibrate bsdf`'s, but views, iterations and
@@ -373,7 +355,7 @@ impl CalibrationService for CalibrationServer {
                         iteration: p.iteration as u32,
                         iterations_total: p.iterations_total as u32,
                         loss: p.loss,
-                        params: Some(material_message(&p.params)),
+                        params: Some(v1::PrincipledMaterial::from(&p.params)),
                     })),
                 };
                 // A client that went away stops the fit.
@@ -388,7 +370,7 @@ impl CalibrationService for CalibrationServer {
                     .map_err(|e| Status::internal(format!("encoding the material file: {e}")))?;
                 Ok(v1::FitBsdfEvent {
                     event: Some(Event::Result(v1::FitBsdfResult {
-                        material: Some(material_message(&fit.result.params)),
+                        material: Some(v1::PrincipledMaterial::from(&fit.result.params)),
                         final_loss: fit.result.loss.last().copied().unwrap_or(f64::NAN),
                         judged_l2: fit.judged_l2,
                         elapsed_s: fit.elapsed_s,

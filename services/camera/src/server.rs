@@ -116,58 +116,6 @@ fn pose_field(pose: &Option<v1::Pose>, field: &str) -> Result<Isometry3<f64>, Co
     Isometry3::try_from(required(pose, field)?).map_err(|e| e.within(field))
 }
 
-/// A principled material, each parameter in [0, 1].
-pub fn material_from_message(
-    m: &v1::PrincipledMaterial,
-) -> Result<PrincipledParams<f32>, ConversionError> {
-    let values = [
-        ("base_color", m.base_color),
-        ("metallic", m.metallic),
-        ("roughness", m.roughness),
-        ("specular", m.specular),
-        ("spec_tint", m.spec_tint),
-        ("anisotropic", m.anisotropic),
-        ("sheen", m.sheen),
-        ("sheen_tint", m.sheen_tint),
-        ("clearcoat", m.clearcoat),
-        ("clearcoat_gloss", m.clearcoat_gloss),
-    ];
-    if let Some((name, value)) = values.iter().find(|(_, v)| !(0.0..=1.0).contains(v)) {
-        return Err(ConversionError::new(
-            *name,
-            format!("{value} must be a finite number in [0, 1]"),
-        ));
-    }
-    Ok(PrincipledParams {
-        base_color: m.base_color as f32,
-        metallic: m.metallic as f32,
-        roughness: m.roughness as f32,
-        specular: m.specular as f32,
-        spec_tint: m.spec_tint as f32,
-        anisotropic: m.anisotropic as f32,
-        sheen: m.sheen as f32,
-        sheen_tint: m.sheen_tint as f32,
-        clearcoat: m.clearcoat as f32,
-        clearcoat_gloss: m.clearcoat_gloss as f32,
-    })
-}
-
-/// A principled material as its message.
-pub fn material_to_message(p: &PrincipledParams<f32>) -> v1::PrincipledMaterial {
-    v1::PrincipledMaterial {
-        base_color: f64::from(p.base_color),
-        metallic: f64::from(p.metallic),
-        roughness: f64::from(p.roughness),
-        specular: f64::from(p.specular),
-        spec_tint: f64::from(p.spec_tint),
-        anisotropic: f64::from(p.anisotropic),
-        sheen: f64::from(p.sheen),
-        sheen_tint: f64::from(p.sheen_tint),
-        clearcoat: f64::from(p.clearcoat),
-        clearcoat_gloss: f64::from(p.clearcoat_gloss),
-    }
-}
-
 /// The widest a user's part may be, metres along any axis: the bin's narrower inner side
 /// (a bigger part cannot be dropped in, and its collision grid would be needlessly large).
 fn max_part_extent_m(bin: &BinSpec) -> f64 {
@@ -228,7 +176,7 @@ pub fn scene_request(msg: &v1::SetUpSceneRequest) -> Result<SceneRequest, Conver
         ));
     }
     let material = match &msg.material {
-        Some(m) => material_from_message(m).map_err(|e| e.within("material"))?,
+        Some(m) => PrincipledParams::try_from(m).map_err(|e| e.within("material"))?,
         None => default_material,
     };
     let (width_px, height_px) = match (msg.width_px, msg.height_px) {
@@ -743,7 +691,7 @@ impl MockCameraService for Camera {
                 .iter()
                 .map(|t| v1::Pose::with_frames(t, WORLD, "object"))
                 .collect(),
-            material: Some(material_to_message(&scene.material)),
+            material: Some(v1::PrincipledMaterial::from(&scene.material)),
         }))
     }
 }

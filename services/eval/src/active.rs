@@ -458,11 +458,7 @@ mod tests {
                 fault,
                 captures: Default::default(),
             };
-            let stages = Stages {
-                camera: &camera,
-                estimation: &estimation,
-                prediction: None,
-            };
+            let stages = Stages::without_prediction(&camera, &estimation);
             let mut session =
                 Session::new("t".into(), config(&scene, ViewPolicy::MaxDistance, 2)).unwrap();
             let result = session::run(&mut session, &scene.object, &stages, |_| {}, || false);
@@ -497,11 +493,7 @@ mod tests {
     fn a_session_takes_distinct_views_until_its_budget_and_resumes_identically() {
         let scene = small_scene();
         let estimation = LocalEstimation::default();
-        let stages = Stages {
-            camera: &scene.camera,
-            estimation: &estimation,
-            prediction: None,
-        };
+        let stages = Stages::without_prediction(&scene.camera, &estimation);
         let mut session =
             Session::new("t".into(), config(&scene, ViewPolicy::MaxDistance, 3)).unwrap();
         let mut seen = Vec::new();
@@ -540,11 +532,7 @@ mod tests {
     fn sessions_stop_at_the_threshold_and_refuse_what_they_cannot_run() {
         let scene = small_scene();
         let estimation = LocalEstimation::default();
-        let stages = Stages {
-            camera: &scene.camera,
-            estimation: &estimation,
-            prediction: None,
-        };
+        let stages = Stages::without_prediction(&scene.camera, &estimation);
         // Any pose entropy is below +10⁶ nats: one view and the session has converged.
         let mut c = config(&scene, ViewPolicy::Random, 5);
         c.entropy_threshold_nats = Some(1e6);

@@ -36,6 +36,7 @@ use glint_estimation::nbv::{
 use glint_estimation::points::DepthPoint;
 use glint_estimation::refine::{RefineStatus, SdfRefineConfig, refine_grid_config, refine_sdf};
 use glint_estimation::view::{SigmaSource, points_in_mask, view_sigma};
+use glint_geometry::Part;
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::pose_deviation::{CorrectThreshold, PoseDeviation, pose_deviation};
 use glint_geometry::sdf::SdfGrid;
@@ -102,7 +103,8 @@ pub fn policy_column(policy: ViewPolicy) -> &'static str {
 /// One refinement problem: an instance of a bin and a detector's guess of its pose.
 #[derive(Clone, Debug)]
 struct Trial {
-    part: usize,
+    /// [`part_key`] of the part's name.
+    part_key: u64,
     scene: u32,
     detection_view: usize,
     /// The detection view's left camera → world.
@@ -269,12 +271,25 @@ fn choose(
     Ok((plan.chosen, h, predict_ms))
 }
 
+/// A number naming a part by its name, so that a trial's seeds do not depend on which other
+/// parts the run has (`--parts gear` draws the Gear's trials of `--parts all`): a shipped
+/// part's place in [`Part::ALL`] (its place in `--parts all`, the published runs' key), any
+/// other mesh its name's 64-bit FNV-1a.
+fn part_key(name: &str) -> u64 {
+    match Part::ALL.iter().position(|p| p.name() == name) {
+        Some(index) => index as u64,
+        None => name.bytes().fold(0xCBF2_9CE4_8422_2325, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01B3)
+        }),
+    }
+}
+
 /// A number naming a trial (its part, bin, detection view and instance) for seeds.
 fn trial_key(trial: &Trial) -> u64 {
-    (trial.part as u64) << 40
-        | u64::from(trial.scene) << 24
-        | (trial.detection_view as u64) << 12
-        | trial.instance as u64
+    trial.part_key.rotate_left(40)
+        ^ (u64::from(trial.scene) << 24
+            | (trial.detection_view as u64) << 12
+            | trial.instance as u64)
 }
 
 /// The refinement after a run's newest view: all its views' points of the trial's instance,
@@ -348,7 +363,7 @@ pub fn run(
     let prior = PosePrior::default();
     let noise = InitialPoseNoise::default();
     let mut rows = Vec::new();
-    for (part_index, part) in spec.objects.iter().enumerate() {
+    for part in &spec.objects {
         let object = &part.object;
         let grid = SdfGrid::build(&object.mesh, &refine_grid_config())
             .with_context(|| format!("SDF of {}", object.name))?;
@@ -390,7 +405,7 @@ pub fn run(
                     }
                     let gt_t_w_o = setup.poses[instance];
                     let mut trial = Trial {
-                        part: part_index,
+                        part_key: part_key(&object.name),
                         scene: s,
                         detection_view: d,
                         detection_t_w_c: candidates[d],
@@ -937,5 +952,16 @@ mod tests {
         assert_eq!(detection_views(4, 60), [0, 15, 30, 45]);
         assert_eq!(detection_views(0, 60), [0]);
         assert_eq!(detection_views(9, 3), [0, 1, 2]);
+    }
+
+    #[test]
+    fn a_part_keys_its_trials_by_name_not_by_its_place_in_the_run() {
+        // The published `--parts all` runs keyed a part by its place in Part::ALL.
+        for (index, part) in Part::ALL.iter().enumerate() {
+            assert_eq!(part_key(part.name()), index as u64);
+        }
+        let custom = part_key("bracket");
+        assert!(custom >= Part::ALL.len() as u64);
+        assert_ne!(custom, part_key("bracket2"));
     }
 }

@@ -15,6 +15,7 @@ use glint_proto::v1;
 use glint_proto::v1::orchestrator_service_server::{
     OrchestratorService, OrchestratorServiceServer,
 };
+use glint_render::bsdf::PrincipledParams;
 use nalgebra::{Isometry3, Matrix6};
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status};
@@ -158,8 +159,7 @@ pub fn session_request(msg: &v1::StartSessionRequest) -> Result<SessionRequest, 
                 ));
             }
             Some(PartCalibration {
-                material: glint_uncertainty::server::material_from_message(material)
-                    .map_err(|e| e.within("material"))?,
+                material: PrincipledParams::try_from(material).map_err(|e| e.within("material"))?,
                 response: glint_calibration::server::response_from_message(response)
                     .map_err(|e| e.within("response"))?,
                 radiometric_scale: scale,

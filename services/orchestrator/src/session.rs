@@ -406,6 +406,20 @@ pub struct Stages<'a> {
     pub prediction: Option<(&'a dyn PredictionStage, &'a PredictionObject)>,
 }
 
+impl<'a> Stages<'a> {
+    /// The stages of a session whose policy predicts nothing (Random, Max-Distance).
+    pub fn without_prediction(
+        camera: &'a dyn CameraStage,
+        estimation: &'a dyn EstimationStage,
+    ) -> Self {
+        Self {
+            camera,
+            estimation,
+            prediction: None,
+        }
+    }
+}
+
 /// The noise seed of capture `step` of a session seeded `seed`.
 pub fn step_capture_seed(seed: u64, step: usize) -> u64 {
     glint_camera::setup::capture_seed(seed, step)

@@ -182,8 +182,6 @@ fn mesh_of(file: &Option<v1::MeshFile>, field: &str) -> Result<TriMesh, Conversi
     Ok(loaded.mesh)
 }
 
-pub use glint_camera::server::{material_from_message, material_to_message};
-
 /// The rig: the stereo pair and the projector at `t_left_projector` (absent: at the rig's
 /// midpoint, looking along the left camera's +z).
 pub fn rig_from_message(rig: &v1::GetRigResponse) -> Result<SliRig, ConversionError> {
@@ -309,7 +307,7 @@ pub fn object_to_message(object: &ObjectDescription<'_>) -> v1::RegisterObjectRe
     let camera = &object.camera;
     v1::RegisterObjectRequest {
         mesh: Some(mesh_file(object.mesh, object.name)),
-        material: Some(material_to_message(object.material)),
+        material: Some(v1::PrincipledMaterial::from(object.material)),
         response: Some(glint_calibration::server::response_to_message(
             &camera.response,
         )),
@@ -329,7 +327,7 @@ pub fn object_to_message(object: &ObjectDescription<'_>) -> v1::RegisterObjectRe
             .map(|s| v1::KnownSurface {
                 mesh: Some(mesh_file(&s.mesh, "surrounding")),
                 t_w_s: Some((&s.t_w_s).into()),
-                material: Some(material_to_message(&s.material)),
+                material: Some(v1::PrincipledMaterial::from(&s.material)),
             })
             .collect(),
     }
@@ -342,7 +340,7 @@ pub fn decode_object(
     sdf: &SdfConfig,
 ) -> Result<RegisteredObject, ConversionError> {
     let mesh = mesh_of(&request.mesh, "mesh")?;
-    let material = material_from_message(required(&request.material, "material")?)
+    let material = PrincipledParams::try_from(required(&request.material, "material")?)
         .map_err(|e| e.within("material"))?;
     let response = response_from_message(required(&request.response, "response")?)
         .map_err(|e| e.within("response"))?;
@@ -399,7 +397,7 @@ pub fn decode_object(
                     mesh: Arc::new(mesh_of(&s.mesh, "mesh")?),
                     t_w_s: Isometry3::try_from(required(&s.t_w_s, "t_w_s")?)
                         .map_err(|e| e.within("t_w_s"))?,
-                    material: material_from_message(required(&s.material, "material")?)
+                    material: PrincipledParams::try_from(required(&s.material, "material")?)
                         .map_err(|e| e.within("material"))?,
                 })
             };
@@ -695,12 +693,18 @@ mod tests {
         assert_eq!(back, rig);
 
         let m = PrincipledParams::from_array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0]);
-        assert_eq!(material_from_message(&material_to_message(&m)).unwrap(), m);
+        assert_eq!(
+            PrincipledParams::try_from(v1::PrincipledMaterial::from(&m)).unwrap(),
+            m
+        );
         let bad = v1::PrincipledMaterial {
             roughness: f64::NAN,
-            ..material_to_message(&m)
+            ..v1::PrincipledMaterial::from(&m)
         };
-        assert_eq!(material_from_message(&bad).unwrap_err().field, "roughness");
+        assert_eq!(
+            PrincipledParams::try_from(&bad).unwrap_err().field,
+            "roughness"
+        );
 
         let noise = NoiseModel::constant(1e-5);
         assert_eq!(

@@ -547,6 +547,18 @@ struct Entry {
     start: usize,
 }
 
+impl Entry {
+    /// Moves to entry `index` of `element`, starting at `start`; the name's buffer is reused
+    /// while the element stays the same.
+    fn begin(&mut self, element: &Element, index: usize, start: usize) {
+        if self.element != element.name {
+            self.element.clone_from(&element.name);
+        }
+        self.index = index;
+        self.start = start;
+    }
+}
+
 /// Reads the values of a PLY body, ascii or binary, entry by entry.
 trait Body {
     fn file(&self) -> &str;
@@ -646,10 +658,7 @@ impl Body for AsciiBody<'_> {
     }
 
     fn begin_entry(&mut self, element: &Element, index: usize) -> Result<(), MeshIoError> {
-        if self.entry.element != element.name {
-            self.entry.element.clone_from(&element.name);
-        }
-        self.entry.index = index;
+        self.entry.begin(element, index, self.lines.next_number());
         loop {
             let Some((number, line)) = self.lines.next() else {
                 self.entry.start = self.lines.next_number();
@@ -771,11 +780,7 @@ impl Body for BinaryBody<'_> {
     }
 
     fn begin_entry(&mut self, element: &Element, index: usize) -> Result<(), MeshIoError> {
-        if self.entry.element != element.name {
-            self.entry.element.clone_from(&element.name);
-        }
-        self.entry.index = index;
-        self.entry.start = self.offset;
+        self.entry.begin(element, index, self.offset);
         Ok(())
     }
 
