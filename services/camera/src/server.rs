@@ -669,9 +669,9 @@ impl MockCameraService for Camera {
                     Isometry3::try_from(pose).map_err(|e| e.within("visibility_from_t_w_c"))?;
                 let scene = scene.clone();
                 glint_server::blocking(move || {
-                    let [left, _] = scene.setup.rig.cameras(&t_w_c);
-                    let labels: Vec<u16> = (1..=scene.setup.poses.len() as u16).collect();
-                    crate::visibility::instance_visibility(&scene.setup.scene, &left, &labels)
+                    scene
+                        .setup
+                        .instance_visibility(&t_w_c)
                         .iter()
                         .map(|v| v1::InstanceVisibility {
                             px_count_all: v.px_count_all as u32,

@@ -12,6 +12,7 @@ use nalgebra::Isometry3;
 use crate::bin::{BinError, BinSpec, bin_scene, drop_parts};
 use crate::capture::{CaptureConfig, MockSliCamera};
 use crate::views;
+use crate::visibility::{InstanceVisibility, instance_visibility};
 
 /// Working distance of the capture views from the bin's centre, metres (like ROBI's robot-arm
 /// views); every command that captures a bin uses it and [`VIEW_CAP_DEG`].
@@ -132,6 +133,14 @@ impl BinSetup {
             self.bin.centre(),
             self.rig.stereo.baseline_m,
         )
+    }
+
+    /// How much of each instance (in [`BinSetup::poses`] order) the rig's left camera sees
+    /// from `t_w_c` (left camera → world).
+    pub fn instance_visibility(&self, t_w_c: &Isometry3<f64>) -> Vec<InstanceVisibility> {
+        let [left, _] = self.rig.cameras(t_w_c);
+        let labels: Vec<u16> = (1..=self.poses.len() as u16).collect();
+        instance_visibility(&self.scene, &left, &labels)
     }
 }
 

@@ -5,7 +5,6 @@
 
 use anyhow::Context;
 use glint_camera::setup::{BinSetup, BinSetupSpec};
-use glint_camera::visibility::instance_visibility;
 use glint_geometry::image::Image;
 use glint_geometry::pose_deviation::{PoseDeviation, pose_deviation};
 use glint_geometry::{Part, Symmetry};
@@ -81,9 +80,8 @@ pub fn set_up(spec: &ActiveSceneSpec) -> anyhow::Result<ActiveScene> {
     anyhow::ensure!(spec.candidates >= 2, "candidates: at least 2 views");
     let candidates = setup.views(spec.candidates);
     let first_view = 0;
-    let [left, _] = setup.rig.cameras(&candidates[first_view]);
-    let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
-    let visibility: Vec<(f64, f64)> = instance_visibility(&setup.scene, &left, &labels)
+    let visibility: Vec<(f64, f64)> = setup
+        .instance_visibility(&candidates[first_view])
         .iter()
         .map(|v| (v.visib_fract, v.px_count_all as f64))
         .collect();

@@ -28,7 +28,6 @@ use std::time::Instant;
 
 use anyhow::Context;
 use glint_camera::setup::capture_seed;
-use glint_camera::visibility::instance_visibility;
 use glint_estimation::depth_alignment::{DepthAlignmentConfig, align_depth_along};
 use glint_estimation::nbv::{
     PosePrior, max_distance_view, plan_next_view, pose_entropy_nats, random_view,
@@ -391,15 +390,10 @@ pub fn run(
             // Trials: every instance visible enough from each detection view, its pose guessed
             // there by the stand-in detector.
             let setup = &camera.setup;
-            let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
             let mut trials = Vec::new();
             for d in detection_views(spec.detection_views, candidates.len()) {
-                let [left, _] = setup.rig.cameras(&candidates[d]);
                 let t_c_w = candidates[d].inverse();
-                for (instance, v) in instance_visibility(&setup.scene, &left, &labels)
-                    .iter()
-                    .enumerate()
-                {
+                for (instance, v) in setup.instance_visibility(&candidates[d]).iter().enumerate() {
                     if v.visib_fract < spec.min_visib_fract {
                         continue;
                     }

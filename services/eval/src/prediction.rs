@@ -29,7 +29,6 @@ use std::path::PathBuf;
 use anyhow::Context;
 use glint_calibration::material_file::MaterialFile;
 use glint_camera::setup::capture_seed;
-use glint_camera::visibility::instance_visibility;
 use glint_estimation::nbv::{PosePrior, pose_entropy_nats};
 use glint_estimation::refine::information_of_points;
 use glint_estimation::view::{SigmaSource, ViewSigma, points_in_mask, view_sigma};
@@ -250,11 +249,10 @@ pub fn run(
             )
             .with_context(|| format!("{} bin {s}", object.name))?;
             let setup = &camera.setup;
-            let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
-            let [left0, _] = setup.rig.cameras(&candidates[0]);
             // The judged instances: the most visible from the first candidate, enough of
             // each in view (the same captures serve them all).
-            let mut judged: Vec<_> = instance_visibility(&setup.scene, &left0, &labels)
+            let mut judged: Vec<_> = setup
+                .instance_visibility(&candidates[0])
                 .into_iter()
                 .filter(|v| v.visib_fract >= spec.min_visib_fract)
                 .collect();

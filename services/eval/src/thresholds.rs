@@ -10,7 +10,6 @@
 use std::fmt::Write as _;
 
 use glint_camera::setup::{BinSetup, BinSetupSpec};
-use glint_camera::visibility::instance_visibility;
 use glint_geometry::Part;
 use glint_orchestrator::local::SdfCache;
 use glint_orchestrator::stages::SessionObject;
@@ -146,9 +145,7 @@ pub fn run(
             let rendered = camera.render_shots(t_w_c, view_seed);
             let (capture, _) = camera.capture_rendered(t_w_c, &rendered, view_seed)?;
             let truth = &rendered.truth;
-            let [left, _] = setup.rig.cameras(t_w_c);
-            let labels: Vec<u16> = (1..=setup.poses.len() as u16).collect();
-            for vis in instance_visibility(&setup.scene, &left, &labels) {
+            for vis in setup.instance_visibility(t_w_c) {
                 if vis.px_count_visib < study.min_visible_px {
                     continue;
                 }
