@@ -93,23 +93,27 @@ pub struct BsdfArgs {
     /// rough (path-space regularisation): glossy-to-glossy inter-reflections of the point-like
     /// projector are blurred, a bias, and lose the fireflies that otherwise swamp the loss on
     /// shiny metals. 0 renders exactly as the camera does.
-    #[arg(long, default_value_t = 0.5, value_parser = parse_unit_interval)]
+    #[arg(long, default_value_t = 0.5, value_parser = parse_unit_interval::<f32>)]
     pub min_indirect_roughness: f32,
     /// Starting value of every free parameter, comma separated for several fits from
     /// different starts: the one with the lowest unbiased L2 (two independent renders at 4×
     /// the samples, the final floor) is kept. 0.5 is the paper's start;
     /// a near-mirror (the Chrome Screw) also needs a low one, e.g. `0.5,0.1`.
-    #[arg(long, value_delimiter = ',', default_value = "0.5", value_parser = parse_unit_interval)]
+    #[arg(long, value_delimiter = ',', default_value = "0.5", value_parser = parse_unit_interval::<f32>)]
     pub start: Vec<f32>,
     /// The regularisation floor of the last iteration: it falls linearly from
     /// --min-indirect-roughness to this, so that the fit ends on nearly exact renders.
-    #[arg(long, default_value_t = 0.1, value_parser = parse_unit_interval)]
+    #[arg(long, default_value_t = 0.1, value_parser = parse_unit_interval::<f32>)]
     pub final_min_indirect_roughness: f32,
 }
 
-fn parse_unit_interval(s: &str) -> Result<f32, String> {
-    match s.parse::<f32>() {
-        Ok(x) if (0.0..=1.0).contains(&x) => Ok(x),
+/// A number in [0, 1] (a share, a roughness), for clap.
+pub(crate) fn parse_unit_interval<T>(s: &str) -> Result<T, String>
+where
+    T: std::str::FromStr + PartialOrd + From<u8>,
+{
+    match s.parse::<T>() {
+        Ok(x) if (T::from(0)..=T::from(1)).contains(&x) => Ok(x),
         _ => Err(format!("{s:?} must be a number in [0, 1]")),
     }
 }
@@ -162,7 +166,7 @@ pub struct EvalBsdfArgs {
     pub spp: u32,
     /// Regularisation of the comparison renders, as `calibrate bsdf --min-indirect-roughness`
     /// (0: exact).
-    #[arg(long, default_value_t = 0.0, value_parser = parse_unit_interval)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_unit_interval::<f32>)]
     pub min_indirect_roughness: f32,
     /// Optional: the response the fit used. Then the L2 loss against the measured radiance
     /// of the fitted views is printed for the fitted and the true material: a true material

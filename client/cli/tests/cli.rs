@@ -377,6 +377,42 @@ fn refine_bench_prints_its_table_writes_csv_and_exports_problems() {
 }
 
 #[test]
+fn nbv_bench_judges_its_cheaper_decisions_by_the_full_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("variants.csv");
+    let o = glint(argv(
+        "bench nbv --part zigzag --candidates 4 --instances 3 --resolution 640x512 \
+        --shortlist 2,9 --prediction-spp 1,2 --variants-csv {}",
+        &[csv.to_str().unwrap()],
+    ));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let csv = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next(),
+        Some(
+            "threads,candidates,shortlist,prediction_spp,screen_ms,total_ms,chosen,\
+             reference_rank,entropy_regret_nats"
+        )
+    );
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect();
+    // K ∈ {2, all (9 ≥ 4 candidates)} × spp ∈ {1, 2}.
+    assert_eq!(rows.len(), 4, "{csv}");
+    for row in &rows {
+        let rank: usize = row[7].parse().unwrap();
+        let regret: f64 = row[8].parse().unwrap();
+        assert!((1..=4).contains(&rank) && regret >= 0.0, "{row:?}");
+        // Rank 1 means no candidate has less entropy: no regret, and the converse.
+        assert_eq!(rank == 1, regret == 0.0, "{row:?}");
+    }
+    // Every candidate at the workers' 2 spp is the full decision again, render seeds and all.
+    let same = rows.iter().find(|r| r[2] == "4" && r[3] == "2").unwrap();
+    assert_eq!((same[7].as_str(), same[8].as_str()), ("1", "0.000000"));
+}
+
+#[test]
 fn nbv_bench_exports_its_candidates_and_crops_for_mitsuba() {
     use glint_geometry::LengthUnit;
     use glint_geometry::io::read_mesh;

@@ -197,6 +197,30 @@ pub fn plan_next_view(
     })
 }
 
+/// The `k` candidates, best first, whose cheap predicted information (a constant σ_z's: the
+/// Jacobians alone, no rendering) added to `collected` leaves the least entropy (eq 20): the
+/// shortlist a rendered prediction then ranks by [`plan_next_view`], so that only `k` of the
+/// candidates are rendered. Views in `taken` are left out; `k` at or above the number of
+/// free candidates keeps them all. Ties go to the lower index.
+pub fn shortlist(
+    collected: &Matrix6<f64>,
+    cheap: &[Matrix6<f64>],
+    taken: &[usize],
+    prior: &PosePrior,
+    k: usize,
+) -> Result<Vec<usize>, NbvError> {
+    let plan = plan_next_view(collected, cheap, taken, prior)?;
+    let mut free: Vec<(usize, f64)> = plan
+        .entropies_nats
+        .iter()
+        .enumerate()
+        .filter_map(|(i, h)| h.map(|h| (i, h)))
+        .collect();
+    // A stable sort keeps ties in index order.
+    free.sort_by(|a, b| a.1.total_cmp(&b.1));
+    Ok(free.into_iter().take(k).map(|(i, _)| i).collect())
+}
+
 /// SplitMix64: a seeded, portable mix for the random policy (no RNG state to carry).
 fn splitmix64(mut x: u64) -> u64 {
     x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
@@ -318,6 +342,43 @@ mod tests {
         let plan = plan_next_view(&collected, &candidates, &[1], &prior).unwrap();
         assert_eq!(plan.entropies_nats[1], None);
         assert_ne!(plan.chosen, 1);
+    }
+
+    #[test]
+    fn the_shortlist_keeps_the_k_least_entropy_views_in_order() {
+        let prior = PosePrior::default();
+        // Candidate i observes x with weight w_i: more weight, less entropy.
+        let along_x = |w: f64| Matrix6::from_diagonal(&Vector6::new(w, 0.0, 0.0, 0.0, 0.0, 0.0));
+        let cheap = [
+            along_x(1e6),
+            along_x(1e8),
+            along_x(1e4),
+            along_x(1e8),
+            along_x(1e7),
+        ];
+        let collected = Matrix6::zeros();
+        // 1 and 3 tie: the lower index first.
+        assert_eq!(
+            shortlist(&collected, &cheap, &[], &prior, 3).unwrap(),
+            [1, 3, 4]
+        );
+        assert_eq!(
+            shortlist(&collected, &cheap, &[1], &prior, 2).unwrap(),
+            [3, 4]
+        );
+        // k past the free candidates keeps them all; k = 0 keeps none.
+        assert_eq!(
+            shortlist(&collected, &cheap, &[0], &prior, 99).unwrap(),
+            [1, 3, 4, 2]
+        );
+        assert!(
+            shortlist(&collected, &cheap, &[], &prior, 0)
+                .unwrap()
+                .is_empty()
+        );
+        // The first of the shortlist is the plan's choice.
+        let plan = plan_next_view(&collected, &cheap, &[], &prior).unwrap();
+        assert_eq!(plan.chosen, 1);
     }
 
     #[test]

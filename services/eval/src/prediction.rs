@@ -494,6 +494,28 @@ pub fn prediction_csv(rows: &[CandidateRow]) -> String {
     out
 }
 
+impl SummaryRow {
+    /// The row's cells, for `summary.csv` (4 decimals) or for reading (fewer, the log-det
+    /// ratio signed).
+    fn cells(&self, for_csv: bool) -> [String; 7] {
+        let (d, rank_d) = if for_csv { (4, 2) } else { (3, 1) };
+        let logdet = if for_csv {
+            format!("{:.4}", self.median_logdet_ratio)
+        } else {
+            format!("{:+.2}", self.median_logdet_ratio)
+        };
+        [
+            self.part.clone(),
+            self.candidates.to_string(),
+            format!("{:.d$}", self.mean_iou_missing),
+            format!("{:.d$}", self.mean_spearman_sigma),
+            logdet,
+            format!("{:.rank_d$}", self.best_oracle_rank),
+            format!("{:.d$}", self.rank_spearman),
+        ]
+    }
+}
+
 /// `summary.csv`.
 pub fn summary_csv(summary: &[SummaryRow]) -> String {
     let mut out = String::from(
@@ -501,17 +523,7 @@ pub fn summary_csv(summary: &[SummaryRow]) -> String {
          best_oracle_rank,rank_spearman\n",
     );
     for s in summary {
-        let _ = writeln!(
-            out,
-            "{},{},{:.4},{:.4},{:.4},{:.2},{:.4}",
-            s.part,
-            s.candidates,
-            s.mean_iou_missing,
-            s.mean_spearman_sigma,
-            s.median_logdet_ratio,
-            s.best_oracle_rank,
-            s.rank_spearman
-        );
+        let _ = writeln!(out, "{}", s.cells(true).join(","));
     }
     out
 }
@@ -524,17 +536,7 @@ pub fn summary_markdown(summary: &[SummaryRow], candidates: usize) -> String {
          |---|---:|---:|---:|---:|---:|---:|\n"
     );
     for s in summary {
-        let _ = writeln!(
-            out,
-            "| {} | {} | {:.3} | {:.3} | {:+.2} | {:.1} | {:.3} |",
-            s.part,
-            s.candidates,
-            s.mean_iou_missing,
-            s.mean_spearman_sigma,
-            s.median_logdet_ratio,
-            s.best_oracle_rank,
-            s.rank_spearman
-        );
+        let _ = writeln!(out, "| {} |", s.cells(false).join(" | "));
     }
     out
 }
@@ -707,5 +709,29 @@ mod tests {
         assert_eq!(s[0].rank_spearman, -1.0);
         // Median of {−2, 3}: the mean of the middle two.
         assert_eq!(s[0].median_logdet_ratio, 0.5);
+    }
+
+    #[test]
+    fn the_summary_prints_the_same_numbers_to_csv_and_markdown() {
+        let s = SummaryRow {
+            part: "gear".into(),
+            candidates: 60,
+            mean_iou_missing: 0.12346,
+            mean_spearman_sigma: -0.5,
+            median_logdet_ratio: 0.25,
+            best_oracle_rank: 3.2,
+            rank_spearman: 0.75,
+        };
+        let csv = summary_csv(std::slice::from_ref(&s));
+        assert_eq!(
+            csv.lines().nth(1),
+            Some("gear,60,0.1235,-0.5000,0.2500,3.20,0.7500")
+        );
+        let md = summary_markdown(&[s], 60);
+        assert!(md.contains("(of 60)"));
+        assert_eq!(
+            md.lines().nth(2),
+            Some("| gear | 60 | 0.123 | -0.500 | +0.25 | 3.2 | 0.750 |")
+        );
     }
 }

@@ -6,14 +6,19 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use glint_estimation::nbv::{PosePrior, plan_next_view};
-use glint_eval::active::{ActiveScene, ActiveSceneSpec, Calibration, prediction_object, set_up};
+use glint_estimation::nbv::{PosePrior, plan_next_view, shortlist};
+use glint_eval::active::{
+    ActiveScene, ActiveSceneSpec, CONST_SIGMA_Z_M, Calibration, prediction_object, set_up,
+};
 use glint_geometry::Part;
 use glint_geometry::image::PixelRect;
 use glint_geometry::io::write_file_atomically;
 use glint_orchestrator::local::SdfCache;
 use glint_orchestrator::stages::PredictionObject;
-use glint_uncertainty::{PredictionSettings, candidate_seed, predict_candidate};
+use glint_uncertainty::{
+    CandidatePrediction, PredictionSettings, PredictorObject, SigmaModel, candidate_seed,
+    predict_candidate,
+};
 use nalgebra::Matrix6;
 use rayon::prelude::*;
 
@@ -40,6 +45,18 @@ pub struct NbvBenchArgs {
     /// Mitsuba 3 and prints the time ratio.
     #[arg(long)]
     pub mitsuba_export: Option<PathBuf>,
+    /// Also time cheaper decisions and judge each against the full one: render only the K
+    /// candidates a constant-σ_z screen ranks best (comma separated; K ≥ --candidates renders
+    /// them all) …
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub shortlist: Vec<u32>,
+    /// … at these samples per pixel of the prediction renders (comma separated; default the
+    /// workers' 2).
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub prediction_spp: Vec<u32>,
+    /// Also write the cheaper decisions' table as CSV here.
+    #[arg(long)]
+    pub variants_csv: Option<PathBuf>,
 }
 
 /// One decision, milliseconds: per stage the sum over the candidates of each one's own time
@@ -52,6 +69,121 @@ struct DecisionTimes {
     fim_ms: f64,
     entropy_ms: f64,
     total_ms: f64,
+}
+
+impl DecisionTimes {
+    fn add(&mut self, p: &CandidatePrediction) {
+        self.render_ms += p.render_ms;
+        self.sigma_ms += p.sigma_ms;
+        self.fim_ms += p.information_ms;
+    }
+}
+
+/// What the benchmarked decisions share: the scene, the render workers' object, the seed.
+struct Decider<'a> {
+    scene: &'a ActiveScene,
+    predictor: &'a PredictorObject,
+    seed: u64,
+}
+
+impl Decider<'_> {
+    /// The predictions of candidates `indices`, in parallel as the workers make them; each
+    /// candidate's render seed is its index's, so a candidate predicts the same in every
+    /// decision.
+    fn predict(
+        &self,
+        indices: &[usize],
+        settings: &PredictionSettings,
+        times: &mut DecisionTimes,
+    ) -> anyhow::Result<Vec<CandidatePrediction>> {
+        let predictions: Vec<CandidatePrediction> = indices
+            .par_iter()
+            .map(|&i| {
+                predict_candidate(
+                    self.predictor,
+                    &self.scene.initial_t_w_o,
+                    &self.scene.candidates[i],
+                    settings,
+                    candidate_seed(self.seed, i as u32),
+                )
+            })
+            .collect::<Result<_, _>>()?;
+        predictions.iter().for_each(|p| times.add(p));
+        Ok(predictions)
+    }
+
+    /// One decision: the candidates `shortlist_k` allows (all, or the best by a constant-σ_z
+    /// screen, whose time is `screen_ms`) predicted with `settings`, then the entropy plan.
+    /// Returns the chosen candidate, the plan over the predicted ones, the times and the
+    /// screen's time.
+    fn decide(
+        &self,
+        settings: &PredictionSettings,
+        shortlist_k: Option<usize>,
+    ) -> anyhow::Result<Decision> {
+        let started = Instant::now();
+        let mut times = DecisionTimes::default();
+        let all: Vec<usize> = (0..self.scene.candidates.len()).collect();
+        let prior = PosePrior::default();
+        let indices = match shortlist_k {
+            Some(k) if k < all.len() => {
+                let screen = PredictionSettings {
+                    sigma: SigmaModel::Constant {
+                        sigma_z_m: CONST_SIGMA_Z_M,
+                    },
+                    ..*settings
+                };
+                let mut screen_times = DecisionTimes::default();
+                let cheap = self.predict(&all, &screen, &mut screen_times)?;
+                let cheap: Vec<Matrix6<f64>> = cheap.into_iter().map(|p| p.information).collect();
+                shortlist(&Matrix6::zeros(), &cheap, &[], &prior, k)?
+            }
+            _ => all,
+        };
+        let screen_ms = started.elapsed().as_secs_f64() * 1e3;
+        let predictions = self.predict(&indices, settings, &mut times)?;
+        let informations: Vec<Matrix6<f64>> = predictions.iter().map(|p| p.information).collect();
+        let t = Instant::now();
+        let plan = plan_next_view(&Matrix6::zeros(), &informations, &[], &prior)?;
+        times.entropy_ms = t.elapsed().as_secs_f64() * 1e3;
+        times.total_ms = started.elapsed().as_secs_f64() * 1e3;
+        Ok(Decision {
+            chosen: indices[plan.chosen],
+            entropies_nats: plan.entropies_nats,
+            crops: predictions
+                .iter()
+                .map(|p| (p.crop, p.right_crop_u_min_px))
+                .collect(),
+            times,
+            screen_ms,
+        })
+    }
+}
+
+/// A benchmarked decision.
+struct Decision {
+    /// The chosen candidate's index among all.
+    chosen: usize,
+    /// Entropy of each predicted candidate (in prediction order), nats.
+    entropies_nats: Vec<Option<f64>>,
+    /// Each predicted candidate's crops (left crop, right crop's first column), for the export.
+    crops: Vec<(Option<PixelRect>, Option<i64>)>,
+    times: DecisionTimes,
+    /// Time to the shortlist (0 without one), milliseconds.
+    screen_ms: f64,
+}
+
+/// How a cheaper decision's choice ranks by the full decision's predicted entropies
+/// (`reference`, every candidate, no view taken): its rank (1: the same view or one as good)
+/// and its entropy above the best, nats.
+fn judge(reference: &[Option<f64>], chosen: usize) -> (usize, f64) {
+    let h: Vec<f64> = reference
+        .iter()
+        .map(|h| h.unwrap_or(f64::INFINITY))
+        .collect();
+    let best = h.iter().copied().fold(f64::INFINITY, f64::min);
+    let rank = 1 + h.iter().filter(|&&x| x < h[chosen]).count();
+    (rank, h[chosen] - best)
 }
 
 /// The bin one NBV decision is benchmarked on (2 spp captures) and what the render workers
@@ -97,47 +229,19 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
         window_radius_px: object.window_radius_px,
         ..PredictionSettings::default()
     };
-    // Each candidate's crops (left crop, right crop's first column), for the export.
-    type Crops = Vec<(Option<PixelRect>, Option<i64>)>;
-    let decide = || -> anyhow::Result<(DecisionTimes, Crops)> {
-        let started = Instant::now();
-        let mut times = DecisionTimes::default();
-        // As the workers do: candidates in parallel.
-        let predictions: Vec<_> = scene
-            .candidates
-            .par_iter()
-            .enumerate()
-            .map(|(i, t_w_c)| {
-                predict_candidate(
-                    &predictor,
-                    &scene.initial_t_w_o,
-                    t_w_c,
-                    &settings,
-                    candidate_seed(args.seed, i as u32),
-                )
-            })
-            .collect::<Result<_, _>>()?;
-        let mut informations = Vec::with_capacity(predictions.len());
-        let mut crops = Vec::with_capacity(predictions.len());
-        for p in predictions {
-            crops.push((p.crop, p.right_crop_u_min_px));
-            times.render_ms += p.render_ms;
-            times.sigma_ms += p.sigma_ms;
-            times.fim_ms += p.information_ms;
-            informations.push(p.information);
-        }
-        let t = Instant::now();
-        plan_next_view(&Matrix6::zeros(), &informations, &[], &PosePrior::default())?;
-        times.entropy_ms = t.elapsed().as_secs_f64() * 1e3;
-        times.total_ms = started.elapsed().as_secs_f64() * 1e3;
-        Ok((times, crops))
+    let decider = Decider {
+        scene: &scene,
+        predictor: &predictor,
+        seed: args.seed,
     };
     let all = rayon::current_num_threads();
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     // A warm-up decision: caches, page faults.
-    decide()?;
-    let (one_thread, _) = one.install(decide)?;
-    let (all_threads, crops) = decide()?;
+    decider.decide(&settings, None)?;
+    let one_thread = one.install(|| decider.decide(&settings, None))?.times;
+    let reference = decider.decide(&settings, None)?;
+    let all_threads = reference.times;
+    let crops = &reference.crops;
     let rows = [(1, one_thread), (all, all_threads)];
     let mut table = format!(
         "One NBV decision on the {} ({} in the bin, {}×{} px, bin rendered: {}): {} candidates \
@@ -174,6 +278,63 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.csv {
         write_file_atomically(path, csv.as_bytes())?;
     }
+    if !(args.shortlist.is_empty() && args.prediction_spp.is_empty()) {
+        let ks: Vec<Option<usize>> = if args.shortlist.is_empty() {
+            vec![None]
+        } else {
+            args.shortlist.iter().map(|&k| Some(k as usize)).collect()
+        };
+        let spps = if args.prediction_spp.is_empty() {
+            vec![settings.samples_per_pixel]
+        } else {
+            args.prediction_spp.clone()
+        };
+        // The worst candidate's rank and regret say how much a choice can lose here.
+        let (worst_rank, worst_regret) = (0..args.candidates as usize)
+            .map(|i| judge(&reference.entropies_nats, i))
+            .fold((1, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+        let mut table = format!(
+            "Cheaper decisions on {all} threads, each judged by the full decision's predicted \
+             entropies (it chose candidate {}; its worst candidate ranks {worst_rank}, \
+             {worst_regret:.3} nats above it): render only the K best by a constant-σ_z screen, at fewer samples per pixel.\n\n\
+             | shortlist K | prediction spp | screen ms | total ms | speed-up | chosen | rank by the full prediction | entropy above its best, nats |\n\
+             |---:|---:|---:|---:|---:|---:|---:|---:|\n",
+            reference.chosen
+        );
+        let mut csv = String::from(
+            "threads,candidates,shortlist,prediction_spp,screen_ms,total_ms,chosen,reference_rank,entropy_regret_nats\n",
+        );
+        for &k in &ks {
+            for &spp in &spps {
+                let cheaper = PredictionSettings {
+                    samples_per_pixel: spp,
+                    ..settings
+                };
+                let d = decider.decide(&cheaper, k)?;
+                let (rank, regret) = judge(&reference.entropies_nats, d.chosen);
+                let k = k.map_or(args.candidates as usize, |k| {
+                    k.min(args.candidates as usize)
+                });
+                let _ = writeln!(
+                    table,
+                    "| {k} | {spp} | {:.0} | {:.0} | {:.1} | {} | {rank} | {regret:.3} |",
+                    d.screen_ms,
+                    d.times.total_ms,
+                    all_threads.total_ms / d.times.total_ms,
+                    d.chosen
+                );
+                let _ = writeln!(
+                    csv,
+                    "{all},{},{k},{spp},{:.3},{:.3},{},{rank},{regret:.6}",
+                    args.candidates, d.screen_ms, d.times.total_ms, d.chosen
+                );
+            }
+        }
+        println!("{table}");
+        if let Some(path) = &args.variants_csv {
+            write_file_atomically(path, csv.as_bytes())?;
+        }
+    }
     if let Some(dir) = &args.mitsuba_export {
         let glint_times = rows
             .iter()
@@ -184,7 +345,7 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
                 })
             })
             .collect();
-        let path = export_decision(dir, &scene, &object, &settings, &crops, glint_times)?;
+        let path = export_decision(dir, &scene, &object, &settings, crops, glint_times)?;
         println!(
             "wrote {}; next: python3 services/render/scripts/mitsuba_nbv_bench.py {}",
             path.display(),

@@ -32,12 +32,8 @@ pub struct ActiveArgs {
     pub views: u32,
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(2..=256))]
     pub candidates: u32,
-    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=64))]
-    pub instances: u32,
-    #[arg(long, default_value = "1280x1024", value_parser = crate::capture_cmd::parse_resolution)]
-    pub resolution: (u32, u32),
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
-    pub spp: u32,
+    #[command(flatten)]
+    pub bin: super::BinArgs,
     #[command(flatten)]
     pub calibration: crate::calibration_args::CalibrationArgs,
     /// The render workers render the bin with the part (occlusion by its walls,
@@ -67,10 +63,10 @@ pub fn run_cmd(args: &ActiveArgs) -> anyhow::Result<()> {
         policies: args.policies.clone(),
         views: args.views as usize,
         candidates: args.candidates as usize,
-        instances: args.instances,
-        width_px: args.resolution.0,
-        height_px: args.resolution.1,
-        samples_per_pixel: args.spp,
+        instances: args.bin.instances,
+        width_px: args.bin.resolution.0,
+        height_px: args.bin.resolution.1,
+        samples_per_pixel: args.bin.spp,
         masking: Masking {
             align_depth: !args.no_align_depth,
             ..Masking::default()

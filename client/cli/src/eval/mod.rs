@@ -68,6 +68,18 @@ pub fn parse_parts(text: &str) -> anyhow::Result<Vec<glint_geometry::Part>> {
         .collect()
 }
 
+/// The bin and camera of the studies that set up their own mock bins per seed.
+#[derive(clap::Args)]
+pub struct BinArgs {
+    /// Parts per bin.
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub instances: u32,
+    #[arg(long, default_value = "1280x1024", value_parser = crate::capture_cmd::parse_resolution)]
+    pub resolution: (u32, u32),
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub spp: u32,
+}
+
 /// The mock camera's flags of the experiments that capture as they go.
 #[derive(clap::Args)]
 pub struct MockCameraArgs {

@@ -53,7 +53,7 @@ pub struct NbvArgs {
     pub random_draws: u32,
     /// An instance is a trial from a detection view where at least this share of it is
     /// visible (Table I's 0.8).
-    #[arg(long, default_value_t = 0.8)]
+    #[arg(long, default_value_t = 0.8, value_parser = crate::calibrate_cmd::parse_unit_interval::<f64>)]
     pub min_visib_fract: f64,
     #[command(flatten)]
     pub camera: super::MockCameraArgs,
@@ -68,12 +68,6 @@ pub struct NbvArgs {
 }
 
 pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
-    if !(args.min_visib_fract.is_finite() && (0.0..=1.0).contains(&args.min_visib_fract)) {
-        anyhow::bail!(
-            "--min-visib-fract {}: a share from 0 to 1",
-            args.min_visib_fract
-        );
-    }
     let parts = super::parse_parts(&args.parts)?;
     let objects = glint_eval::scenes::eval_objects(
         &parts,

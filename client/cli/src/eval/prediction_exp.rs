@@ -25,7 +25,7 @@ pub struct PredictionArgs {
     /// candidate, among those at least --min-visib-fract visible there.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=40))]
     pub judged_instances: u32,
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = crate::calibrate_cmd::parse_unit_interval::<f64>)]
     pub min_visib_fract: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -50,12 +50,6 @@ pub struct PredictionArgs {
 pub fn run_cmd(args: &PredictionArgs) -> anyhow::Result<()> {
     if !(args.good_depth_mm.is_finite() && args.good_depth_mm > 0.0) {
         anyhow::bail!("--good-depth-mm {}: a positive number", args.good_depth_mm);
-    }
-    if !(args.min_visib_fract.is_finite() && (0.0..=1.0).contains(&args.min_visib_fract)) {
-        anyhow::bail!(
-            "--min-visib-fract {}: a share from 0 to 1",
-            args.min_visib_fract
-        );
     }
     let parts = super::parse_parts(&args.parts)?;
     let objects = glint_eval::scenes::eval_objects(

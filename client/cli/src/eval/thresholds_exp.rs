@@ -18,12 +18,8 @@ pub struct ThresholdsArgs {
     pub seeds: Vec<u64>,
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub views: u32,
-    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=64))]
-    pub instances: u32,
-    #[arg(long, default_value = "1280x1024", value_parser = crate::capture_cmd::parse_resolution)]
-    pub resolution: (u32, u32),
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
-    pub spp: u32,
+    #[command(flatten)]
+    pub bin: super::BinArgs,
     /// τ_I values (eq 16), comma separated.
     #[arg(long, default_value = "0,0.2,0.35,0.5,0.65,0.8", value_delimiter = ',')]
     pub tau_i: Vec<f64>,
@@ -63,10 +59,10 @@ pub fn run_cmd(args: &ThresholdsArgs) -> anyhow::Result<()> {
         part: args.part,
         seeds: args.seeds.clone(),
         views: args.views as usize,
-        instances: args.instances,
-        width_px: args.resolution.0,
-        height_px: args.resolution.1,
-        samples_per_pixel: args.spp,
+        instances: args.bin.instances,
+        width_px: args.bin.resolution.0,
+        height_px: args.bin.resolution.1,
+        samples_per_pixel: args.bin.spp,
         min_visible_px: 100,
         good_depth_m: args.good_depth_mm * 1e-3,
         tau_intensity_ratios: args.tau_i.clone(),
