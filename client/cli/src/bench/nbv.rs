@@ -54,6 +54,10 @@ pub struct NbvBenchArgs {
     /// workers' 2).
     #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u32).range(1..=64))]
     pub prediction_spp: Vec<u32>,
+    /// Judge the cheaper decisions by a full decision at this many samples per pixel (less
+    /// noisy than the workers' 2; default: the benchmarked full decision itself).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub judge_spp: Option<u32>,
     /// Also write the cheaper decisions' table as CSV here.
     #[arg(long)]
     pub variants_csv: Option<PathBuf>,
@@ -173,7 +177,7 @@ struct Decision {
     screen_ms: f64,
 }
 
-/// How a cheaper decision's choice ranks by the full decision's predicted entropies
+/// How a decision's choice ranks by a judging full decision's predicted entropies
 /// (`reference`, every candidate, no view taken): its rank (1: the same view or one as good)
 /// and its entropy above the best, nats.
 fn judge(reference: &[Option<f64>], chosen: usize) -> (usize, f64) {
@@ -289,17 +293,31 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
         } else {
             args.prediction_spp.clone()
         };
+        let judged;
+        let judge_by = match args.judge_spp {
+            Some(spp) => {
+                let judging = PredictionSettings {
+                    samples_per_pixel: spp,
+                    ..settings
+                };
+                judged = decider.decide(&judging, None)?;
+                &judged
+            }
+            None => &reference,
+        };
+        let judge_spp = args.judge_spp.unwrap_or(settings.samples_per_pixel);
         // The worst candidate's rank and regret say how much a choice can lose here.
         let (worst_rank, worst_regret) = (0..args.candidates as usize)
-            .map(|i| judge(&reference.entropies_nats, i))
+            .map(|i| judge(&judge_by.entropies_nats, i))
             .fold((1, 0.0), |a, b| if b.1 > a.1 { b } else { a });
         let mut table = format!(
-            "Cheaper decisions on {all} threads, each judged by the full decision's predicted \
-             entropies (it chose candidate {}; its worst candidate ranks {worst_rank}, \
-             {worst_regret:.3} nats above it): render only the K best by a constant-σ_z screen, at fewer samples per pixel.\n\n\
-             | shortlist K | prediction spp | screen ms | total ms | speed-up | chosen | rank by the full prediction | entropy above its best, nats |\n\
+            "Cheaper decisions on {all} threads, each judged by the predicted entropies of a full \
+             decision at {judge_spp} spp (it chose candidate {}; its worst candidate ranks \
+             {worst_rank}, {worst_regret:.3} nats above it): render only the K best by a \
+             constant-σ_z screen, at fewer samples per pixel.\n\n\
+             | shortlist K | prediction spp | screen ms | total ms | speed-up | chosen | rank by the judge | entropy above its best, nats |\n\
              |---:|---:|---:|---:|---:|---:|---:|---:|\n",
-            reference.chosen
+            judge_by.chosen
         );
         let mut csv = String::from(
             "threads,candidates,shortlist,prediction_spp,screen_ms,total_ms,chosen,reference_rank,entropy_regret_nats\n",
@@ -311,7 +329,7 @@ pub fn run(args: &NbvBenchArgs) -> anyhow::Result<()> {
                     ..settings
                 };
                 let d = decider.decide(&cheaper, k)?;
-                let (rank, regret) = judge(&reference.entropies_nats, d.chosen);
+                let (rank, regret) = judge(&judge_by.entropies_nats, d.chosen);
                 let k = k.map_or(args.candidates as usize, |k| {
                     k.min(args.candidates as usize)
                 });
