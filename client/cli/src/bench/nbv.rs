@@ -98,9 +98,8 @@ impl Decider<'_> {
         &self,
         indices: &[usize],
         settings: &PredictionSettings,
-        times: &mut DecisionTimes,
     ) -> anyhow::Result<Vec<CandidatePrediction>> {
-        let predictions: Vec<CandidatePrediction> = indices
+        Ok(indices
             .par_iter()
             .map(|&i| {
                 predict_candidate(
@@ -111,9 +110,7 @@ impl Decider<'_> {
                     candidate_seed(self.seed, i as u32),
                 )
             })
-            .collect::<Result<_, _>>()?;
-        predictions.iter().for_each(|p| times.add(p));
-        Ok(predictions)
+            .collect::<Result<_, _>>()?)
     }
 
     /// One decision: the candidates `shortlist_k` allows (all, or the best by a constant-σ_z
@@ -137,15 +134,18 @@ impl Decider<'_> {
                     },
                     ..*settings
                 };
-                let mut screen_times = DecisionTimes::default();
-                let cheap = self.predict(&all, &screen, &mut screen_times)?;
-                let cheap: Vec<Matrix6<f64>> = cheap.into_iter().map(|p| p.information).collect();
+                let cheap: Vec<Matrix6<f64>> = (self.predict(&all, &screen)?)
+                    .into_iter()
+                    .map(|p| p.information)
+                    .collect();
                 shortlist(&Matrix6::zeros(), &cheap, &[], &prior, k)?
             }
             _ => all,
         };
         let screen_ms = started.elapsed().as_secs_f64() * 1e3;
-        let predictions = self.predict(&indices, settings, &mut times)?;
+        let predictions = self.predict(&indices, settings)?;
+        // The stage times are the shortlisted predictions'; the screen's are in `screen_ms`.
+        predictions.iter().for_each(|p| times.add(p));
         let informations: Vec<Matrix6<f64>> = predictions.iter().map(|p| p.information).collect();
         let t = Instant::now();
         let plan = plan_next_view(&Matrix6::zeros(), &informations, &[], &prior)?;
