@@ -4,7 +4,8 @@
 //! candidate over a crop holding its projection in both cameras, plus the matcher's window:
 //!
 //! 1. white-pattern single-path (direct) and multi-path (direct + inter-reflected) radiance of
-//!    each camera, through the calibrated response (eq 14–15);
+//!    each camera, through the calibrated response (eq 14–15), both from one multi-path trace
+//!    (the single-path image is its paths' first-vertex terms);
 //! 2. a left pixel is **missing by the ratio test** when `I_single / I_multi < τ_I` (eq 16):
 //!    inter-reflected light swamps the pattern's direct signal (a projector shadow has
 //!    `I_single = 0`);
@@ -35,7 +36,9 @@ use glint_geometry::camera::{PinholeIntrinsics, StereoRig};
 use glint_geometry::image::{DepthMap, Image, PixelRect};
 use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use glint_render::bsdf::PrincipledParams;
-use glint_render::integrator::{Camera, LightTransport, RenderOutput, RenderSettings, render};
+use glint_render::integrator::{
+    Camera, LightTransport, RenderOutput, RenderSettings, render, render_with_single_path,
+};
 use glint_render::projector::{Pattern, Projector};
 use glint_render::rig::SliRig;
 use glint_render::scene::{Scene, SceneError, SceneInstance};
@@ -573,32 +576,31 @@ pub fn predict_candidate(
             ..right_camera
         },
     ];
-    let rendered = |camera: &Camera, transport, seed| -> RenderOutput {
-        render(
-            &scene,
-            camera,
-            &projector,
-            &RenderSettings {
-                transport,
-                samples_per_pixel: settings.samples_per_pixel,
-                roi: None,
-                seed,
-            },
-        )
+    let render_settings = |transport, seed| RenderSettings {
+        transport,
+        samples_per_pixel: settings.samples_per_pixel,
+        roi: None,
+        seed,
     };
     let rendered_sigma = settings.sigma == SigmaModel::Rendered;
-    // Single-path (direct) for both cameras; multi-path only when σ̌_z is rendered.
-    let mut single = Vec::with_capacity(2);
+    // Per camera: a single-path render, or, when σ̌_z is rendered, a multi-path one whose
+    // first-vertex terms are the single-path image (one trace for eq 14 and 15).
+    let mut single: Vec<RenderOutput> = Vec::with_capacity(2);
     let mut multi = Vec::with_capacity(2);
     for (c, camera) in cameras.iter().enumerate() {
         let s = seed ^ (c as u64 + 1).wrapping_mul(0xA5A5);
-        single.push(rendered(camera, LightTransport::SinglePath, s));
         if rendered_sigma {
-            multi.push(rendered(
-                camera,
-                LightTransport::MULTI_PATH_DEFAULT,
-                s ^ 0x5A5A,
-            ));
+            let multi_settings = render_settings(LightTransport::MULTI_PATH_DEFAULT, s);
+            let (output, single_path) =
+                render_with_single_path(&scene, camera, &projector, &multi_settings);
+            multi.push(output.radiance.clone());
+            single.push(RenderOutput {
+                radiance: single_path,
+                ..output
+            });
+        } else {
+            let single_settings = render_settings(LightTransport::SinglePath, s);
+            single.push(render(&scene, camera, &projector, &single_settings));
         }
     }
     let depth_left = single[0].depth_m.clone();
@@ -647,8 +649,8 @@ pub fn predict_candidate(
             }
         }),
         SigmaModel::Rendered => {
-            let (single_l, multi_l) = (&single[0].radiance, &multi[0].radiance);
-            let (single_r, multi_r) = (&single[1].radiance, &multi[1].radiance);
+            let (single_l, multi_l) = (&single[0].radiance, &multi[0]);
+            let (single_r, multi_r) = (&single[1].radiance, &multi[1]);
             // eq 16 on the white images through g.
             for (i, c) in cause.iter_mut().enumerate() {
                 if *c != PixelCause::Kept {

@@ -21,7 +21,8 @@ pub struct ThresholdsArgs {
     #[command(flatten)]
     pub bin: super::BinArgs,
     /// τ_I values (eq 16), comma separated.
-    #[arg(long, default_value = "0,0.2,0.35,0.5,0.65,0.8", value_delimiter = ',')]
+    #[arg(long, default_value = "0,0.2,0.35,0.5,0.65,0.8", value_delimiter = ',',
+          value_parser = crate::calibrate_cmd::parse_unit_interval::<f64>)]
     pub tau_i: Vec<f64>,
     /// τ_σ values (eq 17), mm, comma separated.
     #[arg(long, default_value = "0.25,0.5,1,2,4,1000", value_delimiter = ',')]
@@ -40,10 +41,6 @@ pub struct ThresholdsArgs {
 
 pub fn run_cmd(args: &ThresholdsArgs) -> anyhow::Result<()> {
     let finite = |v: &f64| v.is_finite() && *v >= 0.0;
-    anyhow::ensure!(
-        args.tau_i.iter().all(|t| finite(t) && *t <= 1.0),
-        "--tau-i: values in [0, 1]"
-    );
     anyhow::ensure!(
         args.tau_sigma_mm.iter().all(|t| finite(t) && *t > 0.0),
         "--tau-sigma-mm: positive values"

@@ -34,6 +34,22 @@ pub fn render(
     projector: &Projector,
     settings: &RenderSettings,
 ) -> RenderOutput {
+    render_with_single_path(scene, camera, projector, settings).0
+}
+
+/// [`render`], and from the same paths the single-path radiance (each sample's first-vertex
+/// next-event term, W·sr⁻¹·m⁻², averaged like the radiance): the paper's I_single and I_multi
+/// (eq 14–15) from one trace instead of two. Its expectation is a single-path render's; being
+/// a part of the same samples, it never exceeds the radiance, so I_single / I_multi ≤ 1 exactly.
+///
+/// # Panics
+/// When the camera's intrinsics have a zero side (see [`glint_geometry::camera::PinholeIntrinsics::new`]).
+pub fn render_with_single_path(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    settings: &RenderSettings,
+) -> (RenderOutput, Image<f32>) {
     let mut sinks = vec![(); camera.intrinsics.height_px as usize];
     render_with_sinks(scene, camera, projector, settings, &mut sinks)
 }
@@ -52,15 +68,15 @@ impl DirectSink for () {
     fn direct(&mut self, _: u32, _: Vec3A, _: f32) {}
 }
 
-/// [`render`], handing every next-event contribution of row v to `sinks[v]` (`sinks` has one
-/// entry per image row; rows without one are not rendered).
+/// [`render_with_single_path`], handing every next-event contribution of row v to `sinks[v]`
+/// (`sinks` has one entry per image row; rows without one are not rendered).
 pub(crate) fn render_with_sinks<S: DirectSink>(
     scene: &Scene,
     camera: &Camera,
     projector: &Projector,
     settings: &RenderSettings,
     sinks: &mut [S],
-) -> RenderOutput {
+) -> (RenderOutput, Image<f32>) {
     let k = &camera.intrinsics;
     let (w, h) = (k.width_px, k.height_px);
     let roi = settings
@@ -68,6 +84,7 @@ pub(crate) fn render_with_sinks<S: DirectSink>(
         .and_then(|r| r.clipped_to(w, h))
         .unwrap_or(PixelRect::full(w, h));
     let mut radiance = camera_image(k, 0f32);
+    let mut single_path = radiance.clone();
     let mut depth = Image::filled_like(&radiance, f32::NAN);
     let mut label = Image::filled_like(&radiance, 0u16);
     let (rotation, origin) = camera.rotation_and_origin();
@@ -75,57 +92,64 @@ pub(crate) fn render_with_sinks<S: DirectSink>(
     let rows = radiance
         .data_mut()
         .par_chunks_mut(w as usize)
+        .zip(single_path.data_mut().par_chunks_mut(w as usize))
         .zip(depth.data_mut().par_chunks_mut(w as usize))
         .zip(label.data_mut().par_chunks_mut(w as usize))
         .zip(sinks.par_iter_mut());
     let rays_traced: u64 = rows
         .enumerate()
         .filter(|(v, _)| (roi.v_min..roi.v_min + roi.height).contains(&(*v as u32)))
-        .map(|(v, (((radiance_row, depth_row), label_row), sink))| {
-            let mut rng = rand_pcg::Pcg32::seed_from_u64(
-                settings.seed ^ (v as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
-            );
-            let mut rays = 0u64;
-            for u in roi.u_min..roi.u_min + roi.width {
-                let mut sum = 0.0f32;
-                for s in 0..spp {
-                    let (ju, jv) = if s == 0 {
-                        (0.5, 0.5)
-                    } else {
-                        (rng.random::<f32>(), rng.random::<f32>())
-                    };
-                    let (d_c, direction) = camera_ray(k, &rotation, u as f32 + ju, v as f32 + jv);
-                    let path = trace(
-                        scene,
-                        projector,
-                        origin,
-                        direction,
-                        settings.transport,
-                        &mut rng,
-                        &|i| *scene.material_of(i),
-                        None,
-                        &mut |point, radiance| sink.direct(u, point, radiance),
-                    );
-                    rays += path.rays;
-                    sum += path.radiance;
-                    if s == 0
-                        && let Some((t, instance)) = path.first_hit
-                    {
-                        depth_row[u as usize] = t * d_c.z; // ray length → z
-                        label_row[u as usize] = scene.instances()[instance as usize].label;
+        .map(
+            |(v, ((((radiance_row, single_path_row), depth_row), label_row), sink))| {
+                let mut rng = rand_pcg::Pcg32::seed_from_u64(
+                    settings.seed ^ (v as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+                );
+                let mut rays = 0u64;
+                for u in roi.u_min..roi.u_min + roi.width {
+                    let (mut sum, mut single_path_sum) = (0.0f32, 0.0f32);
+                    for s in 0..spp {
+                        let (ju, jv) = if s == 0 {
+                            (0.5, 0.5)
+                        } else {
+                            (rng.random::<f32>(), rng.random::<f32>())
+                        };
+                        let (d_c, direction) =
+                            camera_ray(k, &rotation, u as f32 + ju, v as f32 + jv);
+                        let path = trace(
+                            scene,
+                            projector,
+                            origin,
+                            direction,
+                            settings.transport,
+                            &mut rng,
+                            &|i| *scene.material_of(i),
+                            None,
+                            &mut |point, radiance| sink.direct(u, point, radiance),
+                        );
+                        rays += path.rays;
+                        sum += path.radiance;
+                        single_path_sum += path.single_path_radiance;
+                        if s == 0
+                            && let Some((t, instance)) = path.first_hit
+                        {
+                            depth_row[u as usize] = t * d_c.z; // ray length → z
+                            label_row[u as usize] = scene.instances()[instance as usize].label;
+                        }
                     }
+                    radiance_row[u as usize] = sum / spp as f32;
+                    single_path_row[u as usize] = single_path_sum / spp as f32;
                 }
-                radiance_row[u as usize] = sum / spp as f32;
-            }
-            rays
-        })
+                rays
+            },
+        )
         .sum();
-    RenderOutput {
+    let output = RenderOutput {
         radiance,
         depth_m: depth,
         label,
         rays_traced,
-    }
+    };
+    (output, single_path)
 }
 
 /// The label of the first surface through each pixel centre (0 where nothing is hit): primary

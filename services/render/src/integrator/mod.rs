@@ -30,7 +30,7 @@ mod tests;
 
 pub use camera::Camera;
 pub(crate) use image::{DirectSink, render_with_sinks};
-pub use image::{RenderOutput, render, render_labels};
+pub use image::{RenderOutput, render, render_labels, render_with_single_path};
 pub use pixel::{
     SinglePathSample, direct_light, path_pixel, path_pixel_frozen_sampling, single_path_pixel,
 };

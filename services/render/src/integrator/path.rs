@@ -12,6 +12,9 @@ use crate::scene::{RAY_EPSILON_M, Scene};
 
 pub(super) struct PathResult<T> {
     pub(super) radiance: T,
+    /// The first vertex's next-event term alone: what the single-path transport estimates
+    /// from the same camera ray (the paper's I_single), a part of `radiance`.
+    pub(super) single_path_radiance: T,
     /// Distance along the camera ray and instance of the first hit.
     pub(super) first_hit: Option<(f32, u32)>,
     pub(super) rays: u64,
@@ -52,6 +55,7 @@ pub(super) fn trace<T: BsdfScalar>(
     };
     let mut result = PathResult {
         radiance: T::from(0.0),
+        single_path_radiance: T::from(0.0),
         first_hit: None,
         rays: 0,
     };
@@ -83,6 +87,9 @@ pub(super) fn trace<T: BsdfScalar>(
         result.rays += shadow_rays;
         let contribution = throughput * direct;
         on_direct(hit.point, contribution);
+        if bounce == 0 {
+            result.single_path_radiance = contribution;
+        }
         result.radiance += contribution;
         if bounce + 1 == max_bounces {
             break;

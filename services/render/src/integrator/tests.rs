@@ -392,3 +392,44 @@ fn regularisation_removes_the_variance_of_glossy_inter_reflections() {
     let ratio = spread(exact) / spread(regularised);
     assert!(ratio > 10.0, "variance ratio exact / regularised: {ratio}");
 }
+
+#[test]
+fn one_multi_path_trace_gives_the_single_path_image_too() {
+    // With one sample per pixel the first ray goes through the centre and its first vertex's
+    // next-event term is drawn before any random number: exactly the single-path render.
+    let scene = plane_scene(PrincipledParams::new(0.5, 1.0, 0.3, 0.0).unwrap());
+    let (camera, projector) = (small_camera(), projector_at(0.05));
+    let settings = |transport, samples_per_pixel| RenderSettings {
+        transport,
+        samples_per_pixel,
+        roi: None,
+        seed: 7,
+    };
+    let single = render(
+        &scene,
+        &camera,
+        &projector,
+        &settings(LightTransport::SinglePath, 1),
+    );
+    let (multi, single_from_multi) = render_with_single_path(
+        &scene,
+        &camera,
+        &projector,
+        &settings(LightTransport::MULTI_PATH_DEFAULT, 1),
+    );
+    assert_eq!(single_from_multi.data(), single.radiance.data());
+    assert!(single.radiance.data().iter().any(|&e| e > 0.0));
+    // A part of the same samples: never above their total, at any sample count.
+    let (multi4, single4) = render_with_single_path(
+        &scene,
+        &camera,
+        &projector,
+        &settings(LightTransport::MULTI_PATH_DEFAULT, 4),
+    );
+    for (total, first) in [
+        (&multi.radiance, &single_from_multi),
+        (&multi4.radiance, &single4),
+    ] {
+        assert!(total.data().iter().zip(first.data()).all(|(t, f)| f <= t));
+    }
+}
