@@ -36,7 +36,9 @@ use glint_geometry::image::Image;
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::sdf::SdfGrid;
 use glint_uncertainty::predict::{PredictionImages, prediction_grid_config};
-use glint_uncertainty::{PixelCause, PredictionSettings, candidate_seed, predict_candidate};
+use glint_uncertainty::{
+    HypothesisScene, PixelCause, PredictionSettings, candidate_seed, predict_candidate_in,
+};
 use rayon::prelude::*;
 
 use crate::active::{MISSING_RGB, prediction_object_for};
@@ -282,13 +284,15 @@ pub fn run(
                 .iter()
                 .map(|v| {
                     let gt_t_w_o = setup.poses[usize::from(v.label - 1)];
+                    let hypothesis = HypothesisScene::build(&predictor, &gt_t_w_o)
+                        .map_err(|e| anyhow::anyhow!("the judged instance's scene: {e}"))?;
                     candidates
                         .par_iter()
                         .enumerate()
                         .map(|(k, t_w_c)| {
-                            predict_candidate(
+                            predict_candidate_in(
                                 &predictor,
-                                &gt_t_w_o,
+                                &hypothesis,
                                 t_w_c,
                                 &settings,
                                 candidate_seed(spec.seed, k as u32),

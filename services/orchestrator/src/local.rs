@@ -21,7 +21,8 @@ use crate::stages::{
     Refinement, SessionObject, StageError, ViewPlan,
 };
 use glint_uncertainty::{
-    PredictionError, PredictionSettings, SigmaModel, candidate_seed, predict_candidate,
+    HypothesisScene, PredictionError, PredictionSettings, SigmaModel, candidate_seed,
+    predict_candidate_in,
 };
 
 /// The mock structured-light camera looking at a bin of parts.
@@ -190,25 +191,27 @@ impl PredictionStage for LocalPrediction {
             with_maps: request.with_maps,
             ..self.settings
         };
+        let prediction_error = |e| match e {
+            PredictionError::Input { field, message } => StageError::invalid(field, message),
+            other => StageError::Internal(other.to_string()),
+        };
+        // One scene for the hypothesis, shared by the candidates.
+        let hypothesis =
+            HypothesisScene::build(&predictor, &request.t_w_o).map_err(prediction_error)?;
         // Candidates in parallel: each one's crop is small, so one render alone leaves cores idle.
         request
             .candidates
             .par_iter()
             .map(|&(index, t_w_c)| {
                 let started = Instant::now();
-                let p = predict_candidate(
+                let p = predict_candidate_in(
                     &predictor,
-                    &request.t_w_o,
+                    &hypothesis,
                     &t_w_c,
                     &settings,
                     candidate_seed(request.seed, index),
                 )
-                .map_err(|e| match e {
-                    PredictionError::Input { field, message } => {
-                        StageError::invalid(field, message)
-                    }
-                    other => StageError::Internal(other.to_string()),
-                })?;
+                .map_err(prediction_error)?;
                 Ok(CandidateInformation {
                     index,
                     information: p.information,

@@ -20,7 +20,8 @@ pub mod response;
 pub mod server;
 
 pub use predict::{
-    CandidatePrediction, KnownSurface, MissingCounts, PixelCause, PredictionError,
+    CandidatePrediction, HypothesisScene, KnownSurface, MissingCounts, PixelCause, PredictionError,
     PredictionSettings, PredictorObject, SigmaModel, candidate_seed, predict_candidate,
+    predict_candidate_in,
 };
 pub use response::CalibratedCamera;

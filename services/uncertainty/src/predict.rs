@@ -21,6 +21,9 @@
 //! 5. the kept pixels' points on the hypothesis surface, with σ̌_z, give the candidate's Fisher
 //!    information `Σ Jᵢᵀ Jᵢ / Σ_sdf,i` (eq 21–22) by the refiner's Jacobian and weights.
 //!
+//! The part at the hypothesis among its surroundings is one scene ([`HypothesisScene`]),
+//! built once and shared by every candidate predicted from that hypothesis.
+//!
 //! Everything is seeded by the request (see [`candidate_seed`]): any worker returns the same
 //! information for the same request.
 
@@ -37,7 +40,7 @@ use glint_geometry::image::{DepthMap, Image, PixelRect};
 use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use glint_render::bsdf::PrincipledParams;
 use glint_render::integrator::{
-    Camera, LightTransport, RenderOutput, RenderSettings, render, render_with_single_path,
+    Camera, LightTransport, RenderSettings, render_first_surface, render_with_single_path,
 };
 use glint_render::projector::{Pattern, Projector};
 use glint_render::rig::SliRig;
@@ -124,8 +127,8 @@ impl Default for PredictionSettings {
     /// τ_I 0.8 and τ_σ 0.03 mm, chosen on tuning seeds 11–13 (Zigzag, 3 views each, the
     /// bin rendered too) by the best balanced accuracy of "usable depth" against the mock
     /// camera's captures (`glint eval thresholds --predict-bin --tau-i 0.5,0.7,0.8,0.85,0.9,0.95
-    /// --tau-sigma-mm 0.03,0.05,0.08,0.12,0.2,1000`: 0.765; the part alone peaks at 0.85 /
-    /// 0.03 mm with 0.687); the evaluation seeds are disjoint. 2 spp, the default camera's
+    /// --tau-sigma-mm 0.03,0.05,0.08,0.12,0.2,1000`: 0.766; the part alone peaks at 0.85 /
+    /// 0.03 mm with 0.678); the evaluation seeds are disjoint. 2 spp, the default camera's
     /// K = 8 shots, 3×3 windows and half-lit patterns, the refiner's σ_model. τ_σ is for that
     /// 1280×1024 camera: σ̌_z scales as 1/f, so a camera at half the resolution needs twice it.
     fn default() -> Self {
@@ -503,8 +506,63 @@ fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-/// Predicts the measurements of the part from candidate `t_w_c` (left camera → world) under
-/// the hypothesis `t_w_o` (object → world), and their Fisher information (module doc).
+/// What every candidate of one decision renders: the part at the pose hypothesis `t_w_o`
+/// (label 1) among its known surroundings (labels 2, 3, … in order), as one scene. Its BVH is
+/// built once per hypothesis and shared by all the candidates predicted from it, on every
+/// thread.
+pub struct HypothesisScene {
+    scene: Scene,
+    t_w_o: Isometry3<f64>,
+    /// Wall time of the build, milliseconds.
+    pub build_ms: f64,
+}
+
+impl HypothesisScene {
+    /// The scene of `object` at the hypothesis `t_w_o` (object → world).
+    pub fn build(
+        object: &PredictorObject,
+        t_w_o: &Isometry3<f64>,
+    ) -> Result<Self, PredictionError> {
+        if !finite_pose(t_w_o) {
+            return Err(input("t_w_o", "must be finite"));
+        }
+        let started = Instant::now();
+        // The part is label 1; the surroundings follow.
+        let mut meshes = vec![(*object.mesh).clone()];
+        let mut instances = vec![SceneInstance {
+            mesh: 0,
+            t_w_o: *t_w_o,
+            material: 0,
+            label: 1,
+        }];
+        let mut materials = vec![object.material];
+        for (i, surface) in object.surroundings.iter().enumerate() {
+            meshes.push((*surface.mesh).clone());
+            materials.push(surface.material);
+            instances.push(SceneInstance {
+                mesh: i + 1,
+                t_w_o: surface.t_w_s,
+                material: i + 1,
+                label: i as u16 + 2,
+            });
+        }
+        let scene = Scene::build(&meshes, instances, materials)?;
+        Ok(Self {
+            scene,
+            t_w_o: *t_w_o,
+            build_ms: ms_since(started),
+        })
+    }
+
+    /// The pose hypothesis the scene holds the part at (object → world).
+    pub fn t_w_o(&self) -> &Isometry3<f64> {
+        &self.t_w_o
+    }
+}
+
+/// One candidate's prediction from the hypothesis `t_w_o`: [`HypothesisScene::build`] then
+/// [`predict_candidate_in`], the build's time counted in `render_ms`. A caller predicting
+/// several candidates from one hypothesis builds the scene once instead.
 pub fn predict_candidate(
     object: &PredictorObject,
     t_w_o: &Isometry3<f64>,
@@ -513,9 +571,24 @@ pub fn predict_candidate(
     seed: u64,
 ) -> Result<CandidatePrediction, PredictionError> {
     validate(settings)?;
-    if !finite_pose(t_w_o) {
-        return Err(input("t_w_o", "must be finite"));
-    }
+    let hypothesis = HypothesisScene::build(object, t_w_o)?;
+    let mut prediction = predict_candidate_in(object, &hypothesis, t_w_c, settings, seed)?;
+    prediction.render_ms += hypothesis.build_ms;
+    Ok(prediction)
+}
+
+/// Predicts the measurements of the part from candidate `t_w_c` (left camera → world) under
+/// the hypothesis `hypothesis` holds (built from this `object`), and their Fisher information
+/// (module doc).
+pub fn predict_candidate_in(
+    object: &PredictorObject,
+    hypothesis: &HypothesisScene,
+    t_w_c: &Isometry3<f64>,
+    settings: &PredictionSettings,
+    seed: u64,
+) -> Result<CandidatePrediction, PredictionError> {
+    validate(settings)?;
+    let t_w_o = &hypothesis.t_w_o;
     if !finite_pose(t_w_c) {
         return Err(input("t_w_c", "must be finite"));
     }
@@ -543,26 +616,7 @@ pub fn predict_candidate(
     };
 
     let started = Instant::now();
-    // The part is label 1; the surroundings follow.
-    let mut meshes = vec![(*object.mesh).clone()];
-    let mut instances = vec![SceneInstance {
-        mesh: 0,
-        t_w_o: *t_w_o,
-        material: 0,
-        label: 1,
-    }];
-    let mut materials = vec![object.material];
-    for (i, surface) in object.surroundings.iter().enumerate() {
-        meshes.push((*surface.mesh).clone());
-        materials.push(surface.material);
-        instances.push(SceneInstance {
-            mesh: i + 1,
-            t_w_o: surface.t_w_s,
-            material: i + 1,
-            label: i as u16 + 2,
-        });
-    }
-    let scene = Scene::build(&meshes, instances, materials)?;
+    let scene = &hypothesis.scene;
     let projector = object.rig.projector(t_w_c, Pattern::White);
     let [left_camera, right_camera] = object.rig.cameras(t_w_c);
     // Each camera cropped to its crop: crop-sized renders, the same rays as the full image's.
@@ -576,36 +630,31 @@ pub fn predict_candidate(
             ..right_camera
         },
     ];
-    let render_settings = |transport, seed| RenderSettings {
-        transport,
-        samples_per_pixel: settings.samples_per_pixel,
-        roi: None,
-        seed,
-    };
     let rendered_sigma = settings.sigma == SigmaModel::Rendered;
-    // Per camera: a single-path render, or, when σ̌_z is rendered, a multi-path one whose
-    // first-vertex terms are the single-path image (one trace for eq 14 and 15).
-    let mut single: Vec<RenderOutput> = Vec::with_capacity(2);
-    let mut multi = Vec::with_capacity(2);
+    // Per camera, the first surface's depth and label; when σ̌_z is rendered, also the white
+    // single- and multi-path radiance, from one multi-path trace whose first-vertex terms are
+    // the single-path image (eq 14 and 15). A constant σ_z needs no shading: the centre rays
+    // alone, which are the renders' own depth and label to the bit.
+    let mut surfaces: Vec<(Image<f32>, Image<u16>)> = Vec::with_capacity(2);
+    let mut white: Vec<(Image<f32>, Image<f32>)> = Vec::with_capacity(2);
     for (c, camera) in cameras.iter().enumerate() {
-        let s = seed ^ (c as u64 + 1).wrapping_mul(0xA5A5);
         if rendered_sigma {
-            let multi_settings = render_settings(LightTransport::MULTI_PATH_DEFAULT, s);
+            let multi_settings = RenderSettings {
+                transport: LightTransport::MULTI_PATH_DEFAULT,
+                samples_per_pixel: settings.samples_per_pixel,
+                roi: None,
+                seed: seed ^ (c as u64 + 1).wrapping_mul(0xA5A5),
+            };
             let (output, single_path) =
-                render_with_single_path(&scene, camera, &projector, &multi_settings);
-            multi.push(output.radiance.clone());
-            single.push(RenderOutput {
-                radiance: single_path,
-                ..output
-            });
+                render_with_single_path(scene, camera, &projector, &multi_settings);
+            surfaces.push((output.depth_m, output.label));
+            white.push((single_path, output.radiance));
         } else {
-            let single_settings = render_settings(LightTransport::SinglePath, s);
-            single.push(render(&scene, camera, &projector, &single_settings));
+            surfaces.push(render_first_surface(scene, camera, None, None));
         }
     }
-    let depth_left = single[0].depth_m.clone();
-    let depth_right = single[1].depth_m.clone();
-    let (label_left, label_right) = (&single[0].label, &single[1].label);
+    let [(depth_left, label_left), (depth_right, label_right)] =
+        <[_; 2]>::try_from(surfaces).map_err(|_| internal("two cameras rendered"))?;
     let render_ms = ms_since(started);
 
     // Which left pixels are the part, and whether the right camera sees the same point.
@@ -649,8 +698,9 @@ pub fn predict_candidate(
             }
         }),
         SigmaModel::Rendered => {
-            let (single_l, multi_l) = (&single[0].radiance, &multi[0]);
-            let (single_r, multi_r) = (&single[1].radiance, &multi[1]);
+            let [(single_l, multi_l), (single_r, multi_r)] = white.as_slice() else {
+                return Err(internal("white renders of both cameras"));
+            };
             // eq 16 on the white images through g.
             for (i, c) in cause.iter_mut().enumerate() {
                 if *c != PixelCause::Kept {
@@ -944,6 +994,12 @@ mod tests {
         let a = predict_candidate(&f.object, &t_w_o, &f.t_w_c, &s, 9).unwrap();
         let b = predict_candidate(&f.object, &t_w_o, &f.t_w_c, &s, 9).unwrap();
         assert_eq!(a.information, b.information, "same request, same answer");
+        // A scene shared by the candidates of a decision changes nothing.
+        let hypothesis = HypothesisScene::build(&f.object, &t_w_o).unwrap();
+        for _ in 0..2 {
+            let shared = predict_candidate_in(&f.object, &hypothesis, &f.t_w_c, &s, 9).unwrap();
+            assert_eq!(shared.information, a.information);
+        }
         let info = a.information;
         assert!((info - info.transpose()).amax() <= 1e-9 * info.amax());
         assert!(info.symmetric_eigenvalues().min() >= -1e-9 * info.amax());

@@ -1,5 +1,5 @@
 //! The render worker's gRPC server (`glint.v1.UncertaintyService`): decode and validate the
-//! request, run [`predict_candidate`] on the blocking pool, encode.
+//! request, run [`crate::predict_candidate_in`] on the blocking pool, encode.
 //!
 //! - `RegisterObject` builds a [`PredictorObject`] (mesh, its SDF grid with the refiner's voxel,
 //!   the fitted material, the calibrated camera, rig, noise and surroundings) and keeps it in a
@@ -32,8 +32,8 @@ use prost::Message;
 use tonic::{Request, Response, Status};
 
 use crate::{
-    CalibratedCamera, KnownSurface, PredictionError, PredictionSettings, PredictorObject,
-    SigmaModel, candidate_seed, predict_candidate,
+    CalibratedCamera, HypothesisScene, KnownSurface, PredictionError, PredictionSettings,
+    PredictorObject, SigmaModel, candidate_seed, predict_candidate_in,
 };
 
 /// The service's name, as health reports it.
@@ -594,14 +594,17 @@ impl UncertaintyService for Uncertainty {
         );
         let seed = request.seed;
         let predictions = glint_server::blocking(move || {
+            // One scene for the request's hypothesis, shared by its candidates.
+            let hypothesis =
+                HypothesisScene::build(&object.object, &t_w_o).map_err(|e| status_of(e, 0))?;
             candidates
                 .iter()
                 .enumerate()
                 .map(|(i, (index, t_w_c))| {
                     let started = Instant::now();
-                    let p = predict_candidate(
+                    let p = predict_candidate_in(
                         &object.object,
-                        &t_w_o,
+                        &hypothesis,
                         t_w_c,
                         &settings,
                         candidate_seed(seed, *index),

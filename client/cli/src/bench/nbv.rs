@@ -16,8 +16,8 @@ use glint_geometry::io::write_file_atomically;
 use glint_orchestrator::local::SdfCache;
 use glint_orchestrator::stages::PredictionObject;
 use glint_uncertainty::{
-    CandidatePrediction, PredictionSettings, PredictorObject, SigmaModel, candidate_seed,
-    predict_candidate,
+    CandidatePrediction, HypothesisScene, PredictionSettings, PredictorObject, SigmaModel,
+    candidate_seed, predict_candidate_in,
 };
 use nalgebra::Matrix6;
 use rayon::prelude::*;
@@ -91,20 +91,21 @@ struct Decider<'a> {
 }
 
 impl Decider<'_> {
-    /// The predictions of candidates `indices`, in parallel as the workers make them; each
-    /// candidate's render seed is its index's, so a candidate predicts the same in every
-    /// decision.
+    /// The predictions of candidates `indices` from the decision's scene `hypothesis`, in
+    /// parallel as the workers make them; each candidate's render seed is its index's, so a
+    /// candidate predicts the same in every decision.
     fn predict(
         &self,
+        hypothesis: &HypothesisScene,
         indices: &[usize],
         settings: &PredictionSettings,
     ) -> anyhow::Result<Vec<CandidatePrediction>> {
         Ok(indices
             .par_iter()
             .map(|&i| {
-                predict_candidate(
+                predict_candidate_in(
                     self.predictor,
-                    &self.scene.initial_t_w_o,
+                    hypothesis,
                     &self.scene.candidates[i],
                     settings,
                     candidate_seed(self.seed, i as u32),
@@ -126,15 +127,22 @@ impl Decider<'_> {
         let mut times = DecisionTimes::default();
         let all: Vec<usize> = (0..self.scene.candidates.len()).collect();
         let prior = PosePrior::default();
+        // One scene for the decision's hypothesis, as a worker builds it per request; its
+        // build counts as rendering.
+        let hypothesis = HypothesisScene::build(self.predictor, &self.scene.initial_t_w_o)?;
+        times.render_ms += hypothesis.build_ms;
         let indices = match shortlist_k {
             Some(k) if k < all.len() => {
+                // The screen needs only which pixels see the part: one sample per pixel
+                // decides visibility as well as many.
                 let screen = PredictionSettings {
                     sigma: SigmaModel::Constant {
                         sigma_z_m: CONST_SIGMA_Z_M,
                     },
+                    samples_per_pixel: 1,
                     ..*settings
                 };
-                let cheap: Vec<Matrix6<f64>> = (self.predict(&all, &screen)?)
+                let cheap: Vec<Matrix6<f64>> = (self.predict(&hypothesis, &all, &screen)?)
                     .into_iter()
                     .map(|p| p.information)
                     .collect();
@@ -143,7 +151,7 @@ impl Decider<'_> {
             _ => all,
         };
         let screen_ms = started.elapsed().as_secs_f64() * 1e3;
-        let predictions = self.predict(&indices, settings)?;
+        let predictions = self.predict(&hypothesis, &indices, settings)?;
         // The stage times are the shortlisted predictions'; the screen's are in `screen_ms`.
         predictions.iter().for_each(|p| times.add(p));
         let informations: Vec<Matrix6<f64>> = predictions.iter().map(|p| p.information).collect();

@@ -55,3 +55,22 @@ pub(super) fn camera_ray(
     let d_w = rotation * d_c;
     (d_c, Vec3A::new(d_w.x, d_w.y, d_w.z))
 }
+
+/// The ray of sample `sample` of pixel (u, v): the first (`sample` 0) through the pixel's
+/// centre, so that depth and label come from it, the rest jittered uniformly over the pixel by
+/// `rng`. As [`camera_ray`]: the direction in the camera frame and in the world.
+#[inline]
+pub(super) fn pixel_sample_ray(
+    k: &PinholeIntrinsics,
+    rotation: &nalgebra::Matrix3<f32>,
+    (u, v): (u32, u32),
+    sample: u32,
+    rng: &mut impl rand::Rng,
+) -> (Vector3<f32>, Vec3A) {
+    let (ju, jv) = if sample == 0 {
+        (0.5, 0.5)
+    } else {
+        (rng.random::<f32>(), rng.random::<f32>())
+    };
+    camera_ray(k, rotation, u as f32 + ju, v as f32 + jv)
+}

@@ -2,10 +2,10 @@
 
 use glam::Vec3A;
 use glint_geometry::image::{Image, PixelRect};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rayon::prelude::*;
 
-use super::camera::{camera_image, camera_ray};
+use super::camera::{camera_image, camera_ray, pixel_sample_ray};
 use super::path::trace;
 use super::{Camera, RenderSettings};
 use crate::projector::Projector;
@@ -108,13 +108,8 @@ pub(crate) fn render_with_sinks<S: DirectSink>(
                 for u in roi.u_min..roi.u_min + roi.width {
                     let (mut sum, mut single_path_sum) = (0.0f32, 0.0f32);
                     for s in 0..spp {
-                        let (ju, jv) = if s == 0 {
-                            (0.5, 0.5)
-                        } else {
-                            (rng.random::<f32>(), rng.random::<f32>())
-                        };
                         let (d_c, direction) =
-                            camera_ray(k, &rotation, u as f32 + ju, v as f32 + jv);
+                            pixel_sample_ray(k, &rotation, (u, v as u32), s, &mut rng);
                         let path = trace(
                             scene,
                             projector,
@@ -152,9 +147,51 @@ pub(crate) fn render_with_sinks<S: DirectSink>(
     (output, single_path)
 }
 
-/// The label of the first surface through each pixel centre (0 where nothing is hit): primary
-/// rays only, no shading. With `only_instance`, every other instance is transparent, which
-/// gives that instance's whole (amodal) silhouette. Pixels outside `roi` stay 0.
+/// The depth (z along the optical axis, metres; NaN where nothing is hit) and the label (0
+/// where nothing is hit) of the first surface through each pixel centre: primary rays only,
+/// no shading, the same centre rays as [`render`]'s, so its `depth_m` and `label` to the bit.
+/// With `only_instance`, every other instance is transparent, which gives that instance's whole
+/// (amodal) silhouette. Pixels outside `roi` stay NaN and 0.
+///
+/// # Panics
+/// When the camera's intrinsics have a zero side (see [`glint_geometry::camera::PinholeIntrinsics::new`]).
+pub fn render_first_surface(
+    scene: &Scene,
+    camera: &Camera,
+    roi: Option<PixelRect>,
+    only_instance: Option<u32>,
+) -> (Image<f32>, Image<u16>) {
+    let k = &camera.intrinsics;
+    let (w, h) = (k.width_px, k.height_px);
+    let mut depth = camera_image(k, f32::NAN);
+    let mut label = camera_image(k, 0u16);
+    let Some(roi) = roi.map_or(Some(PixelRect::full(w, h)), |r| r.clipped_to(w, h)) else {
+        return (depth, label);
+    };
+    let (rotation, origin) = camera.rotation_and_origin();
+    depth
+        .data_mut()
+        .par_chunks_mut(w as usize)
+        .zip(label.data_mut().par_chunks_mut(w as usize))
+        .enumerate()
+        .filter(|(v, _)| (roi.v_min..roi.v_min + roi.height).contains(&(*v as u32)))
+        .for_each(|(v, (depth_row, label_row))| {
+            for u in roi.u_min..roi.u_min + roi.width {
+                let (d_c, direction) = camera_ray(k, &rotation, u as f32 + 0.5, v as f32 + 0.5);
+                let hit = match only_instance {
+                    None => scene.intersect(origin, direction, f32::INFINITY),
+                    Some(i) => scene.intersect_instance(origin, direction, f32::INFINITY, i),
+                };
+                if let Some(hit) = hit {
+                    depth_row[u as usize] = hit.t * d_c.z; // ray length → z
+                    label_row[u as usize] = scene.instances()[hit.instance as usize].label;
+                }
+            }
+        });
+    (depth, label)
+}
+
+/// The label image of [`render_first_surface`].
 ///
 /// # Panics
 /// When the camera's intrinsics have a zero side (see [`glint_geometry::camera::PinholeIntrinsics::new`]).
@@ -164,29 +201,5 @@ pub fn render_labels(
     roi: Option<PixelRect>,
     only_instance: Option<u32>,
 ) -> Image<u16> {
-    let k = &camera.intrinsics;
-    let (w, h) = (k.width_px, k.height_px);
-    let mut label = camera_image(k, 0u16);
-    let Some(roi) = roi.map_or(Some(PixelRect::full(w, h)), |r| r.clipped_to(w, h)) else {
-        return label;
-    };
-    let (rotation, origin) = camera.rotation_and_origin();
-    label
-        .data_mut()
-        .par_chunks_mut(w as usize)
-        .enumerate()
-        .filter(|(v, _)| (roi.v_min..roi.v_min + roi.height).contains(&(*v as u32)))
-        .for_each(|(v, row)| {
-            for u in roi.u_min..roi.u_min + roi.width {
-                let (_, direction) = camera_ray(k, &rotation, u as f32 + 0.5, v as f32 + 0.5);
-                let hit = match only_instance {
-                    None => scene.intersect(origin, direction, f32::INFINITY),
-                    Some(i) => scene.intersect_instance(origin, direction, f32::INFINITY, i),
-                };
-                if let Some(hit) = hit {
-                    row[u as usize] = scene.instances()[hit.instance as usize].label;
-                }
-            }
-        });
-    label
+    render_first_surface(scene, camera, roi, only_instance).1
 }

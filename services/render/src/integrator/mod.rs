@@ -18,7 +18,7 @@
 //! stream derived from `(seed, row)`: a render is reproducible whatever the thread count.
 //!
 //! The module's parts: [`Camera`] (a pinhole placed in the world), whole-image renders
-//! ([`render`], [`render_labels`]), the per-pixel estimators the BSDF fit differentiates
+//! ([`render`], [`render_first_surface`], [`render_labels`]), the per-pixel estimators the BSDF fit differentiates
 //! ([`single_path_pixel`], [`path_pixel`], [`direct_light`]) and the path tracer they share.
 
 mod camera;
@@ -30,7 +30,9 @@ mod tests;
 
 pub use camera::Camera;
 pub(crate) use image::{DirectSink, render_with_sinks};
-pub use image::{RenderOutput, render, render_labels, render_with_single_path};
+pub use image::{
+    RenderOutput, render, render_first_surface, render_labels, render_with_single_path,
+};
 pub use pixel::{
     SinglePathSample, direct_light, path_pixel, path_pixel_frozen_sampling, single_path_pixel,
 };

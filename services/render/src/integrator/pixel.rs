@@ -1,9 +1,9 @@
 //! Per-pixel estimators, generic over the BSDF scalar so that dual-number materials give the
 //! BSDF fit its derivatives: one shading code path for the camera and the fit.
 
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 
-use super::camera::camera_ray;
+use super::camera::{camera_ray, pixel_sample_ray};
 use super::path::trace;
 use super::{Camera, PixelRendering};
 use crate::bsdf::{self, BsdfScalar, PrincipledParams, ShadingFrame};
@@ -141,13 +141,7 @@ pub fn path_pixel_frozen_sampling<T: BsdfScalar>(
     let mut sum = T::from(0.0);
     let mut centre = None;
     for s in 0..spp {
-        let (ju, jv) = if s == 0 {
-            (0.5, 0.5)
-        } else {
-            (rng.random::<f32>(), rng.random::<f32>())
-        };
-        let (d_c, direction) =
-            camera_ray(&camera.intrinsics, &rotation, u as f32 + ju, v as f32 + jv);
+        let (d_c, direction) = pixel_sample_ray(&camera.intrinsics, &rotation, (u, v), s, &mut rng);
         let path = trace(
             scene,
             projector,

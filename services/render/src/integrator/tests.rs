@@ -433,3 +433,33 @@ fn one_multi_path_trace_gives_the_single_path_image_too() {
         assert!(total.data().iter().zip(first.data()).all(|(t, f)| f <= t));
     }
 }
+
+#[test]
+fn first_surface_render_is_the_shaded_renders_depth_and_label() {
+    // The same centre rays: depth and label to the bit (NaN and 0 where the ray misses), at
+    // any sample count of the shaded render, whose later samples are jittered.
+    let scene = plane_scene(PrincipledParams::new(0.5, 1.0, 0.3, 0.0).unwrap());
+    let (camera, projector) = (small_camera(), projector_at(0.05));
+    let (depth, label) = render_first_surface(&scene, &camera, None, None);
+    let bits = |image: &Image<f32>| image.data().iter().map(|z| z.to_bits()).collect::<Vec<_>>();
+    for samples_per_pixel in [1, 3] {
+        let shaded = render(
+            &scene,
+            &camera,
+            &projector,
+            &RenderSettings {
+                transport: LightTransport::MULTI_PATH_DEFAULT,
+                samples_per_pixel,
+                roi: None,
+                seed: 3,
+            },
+        );
+        assert_eq!(bits(&depth), bits(&shaded.depth_m));
+        assert_eq!(label.data(), shaded.label.data());
+    }
+    assert!(label.data().iter().any(|&l| l != 0));
+    assert_eq!(
+        render_labels(&scene, &camera, None, None).data(),
+        label.data()
+    );
+}
