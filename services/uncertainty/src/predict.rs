@@ -87,7 +87,8 @@ pub enum SigmaModel {
     /// Rendering-based missing pixels and σ̌_z (eq 14–17), the paper's method.
     Rendered,
     /// Every part pixel both cameras see, with this σ_z (metres): visibility and Jacobians
-    /// only — the paper's constant-σ baseline. One direct render per camera, for visibility.
+    /// only — the paper's constant-σ baseline. Only the pixel centres' rays are traced, for
+    /// visibility; nothing is shaded.
     Constant {
         /// σ_z of every kept pixel, metres.
         sigma_z_m: f64,
@@ -103,7 +104,7 @@ pub struct PredictionSettings {
     pub tau_intensity_ratio: f64,
     /// τ_σ of eq 17, metres: missing where σ̌_z is above this.
     pub tau_sigma_m: f64,
-    /// Samples per pixel of the renders.
+    /// Samples per pixel of the white renders (a constant σ_z renders none).
     pub samples_per_pixel: u32,
     /// Pattern shots per capture (the camera's K).
     pub shots: u32,

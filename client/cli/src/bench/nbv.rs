@@ -133,13 +133,10 @@ impl Decider<'_> {
         times.render_ms += hypothesis.build_ms;
         let indices = match shortlist_k {
             Some(k) if k < all.len() => {
-                // The screen needs only which pixels see the part: one sample per pixel
-                // decides visibility as well as many.
                 let screen = PredictionSettings {
                     sigma: SigmaModel::Constant {
                         sigma_z_m: CONST_SIGMA_Z_M,
                     },
-                    samples_per_pixel: 1,
                     ..*settings
                 };
                 let cheap: Vec<Matrix6<f64>> = (self.predict(&hypothesis, &all, &screen)?)
