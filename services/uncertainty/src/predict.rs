@@ -1040,6 +1040,17 @@ mod tests {
             matches!(err, PredictionError::Input { field: "t_w_c", .. }),
             "{err}"
         );
+        let mut nan_pose = t_w_o;
+        nan_pose.translation.vector.z = f64::NAN;
+        for err in [
+            HypothesisScene::build(&f.object, &nan_pose).err(),
+            predict_candidate(&f.object, &nan_pose, &f.t_w_c, &settings(), 1).err(),
+        ] {
+            assert!(
+                matches!(err, Some(PredictionError::Input { field: "t_w_o", .. })),
+                "{err:?}"
+            );
+        }
         let s = PredictionSettings {
             tau_sigma_m: -1.0,
             ..settings()
