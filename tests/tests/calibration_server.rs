@@ -200,6 +200,7 @@ async fn fit_bsdf_names_the_bad_field() {
         views: vec![0],
         iterations: 5,
         starts: vec![0.5],
+        known_metallic: None,
     };
     let status = |target: String, request: v1::FitBsdfRequest| async move {
         let mut client = CalibrationServiceClient::connect(target).await.unwrap();
@@ -244,6 +245,20 @@ async fn fit_bsdf_names_the_bad_field() {
                 ..good.clone()
             },
             "starts[1]",
+        ),
+        (
+            v1::FitBsdfRequest {
+                known_metallic: Some(1.5),
+                ..good.clone()
+            },
+            "known_metallic",
+        ),
+        (
+            v1::FitBsdfRequest {
+                known_metallic: Some(f64::NAN),
+                ..good.clone()
+            },
+            "known_metallic",
         ),
         // An empty folder is no capture.
         (good.clone(), "scene_dir"),

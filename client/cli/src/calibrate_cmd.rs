@@ -105,6 +105,11 @@ pub struct BsdfArgs {
     /// --min-indirect-roughness to this, so that the fit ends on nearly exact renders.
     #[arg(long, default_value_t = 0.1, value_parser = parse_unit_interval::<f32>)]
     pub final_min_indirect_roughness: f32,
+    /// The part's metallic weight when its finish is known (1: bare metal, 0: painted or
+    /// plastic): held at this value instead of fitted. A free fit can add a diffuse lobe to
+    /// bare metal and still match the radiance (base colour and specular make up for it).
+    #[arg(long, value_parser = parse_unit_interval::<f32>)]
+    pub known_metallic: Option<f32>,
 }
 
 /// A number in [0, 1] (a share, a roughness), for clap.
@@ -386,6 +391,7 @@ fn bsdf(args: &BsdfArgs) -> anyhow::Result<()> {
         min_indirect_roughness: args.min_indirect_roughness,
         final_min_indirect_roughness: args.final_min_indirect_roughness,
         starts: args.start.clone(),
+        known_metallic: args.known_metallic,
     };
     let bar = glint_eval::progress::bar((args.iterations * args.start.len()) as u64, "BSDF fit");
     let fit = fit_scene(&CameraCaptures, capture, &table, &config, |_| {

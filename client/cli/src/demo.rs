@@ -56,6 +56,16 @@ pub struct DemoArgs {
     /// Adam iterations of the first calibration's BSDF fit.
     #[arg(long, default_value_t = 300, value_parser = clap::value_parser!(u32).range(1..=10000))]
     pub calibration_iterations: u32,
+    /// The part's metallic weight, when its finish is known (1: bare metal, 0: painted or
+    /// plastic), held by the first calibration's BSDF fit instead of fitted. A cached
+    /// calibration is used as it is.
+    #[arg(long, value_parser = crate::calibrate_cmd::parse_unit_interval::<f64>)]
+    pub calibration_known_metallic: Option<f64>,
+    /// Start values of the first calibration's BSDF fit, comma separated: one fit per start,
+    /// the lowest unbiased loss kept (a near-mirror such as the Chrome Screw needs `0.5,0.1`;
+    /// see `glint calibrate bsdf --start`).
+    #[arg(long, value_delimiter = ',', default_value = "0.5", value_parser = crate::calibrate_cmd::parse_unit_interval::<f64>)]
+    pub calibration_start: Vec<f64>,
     /// Views at most (the first included).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub max_views: u32,
@@ -302,12 +312,14 @@ async fn calibrate_once(args: &DemoArgs, addr: &str) -> anyhow::Result<(Calibrat
         "Calibration (first run only): no calibration cached in {}; calibrating the {} through \
          the calibration service — a capture of {CALIBRATION_VIEWS} views × {} exposures of a \
          bin of known poses at {} spp, the response (CalibrateResponse), the material \
-         (FitBsdf, {} iterations).",
+         (FitBsdf, {} iterations{}).",
         cache.dir.display(),
         args.part.display_name(),
         CALIBRATION_EXPOSURES_S.len(),
         args.calibration_spp,
         args.calibration_iterations,
+        args.calibration_known_metallic
+            .map_or(String::new(), |m| format!(", metallic held at {m}")),
     );
     let spec = MockCalibrationSpec {
         part: args.part,
@@ -315,6 +327,8 @@ async fn calibrate_once(args: &DemoArgs, addr: &str) -> anyhow::Result<(Calibrat
         height_px: args.resolution.1,
         samples_per_pixel: args.calibration_spp,
         fit_iterations: args.calibration_iterations,
+        known_metallic: args.calibration_known_metallic,
+        starts: args.calibration_start.clone(),
     };
     let started = Instant::now();
     let capture_bar = glint_eval::progress::bar(CALIBRATION_VIEWS as u64, "calibration capture");

@@ -347,6 +347,7 @@ fn fit_over_grpc(
         views: vec![0],
         iterations,
         starts: Vec::new(),
+        known_metallic: None,
     };
     tokio::runtime::Runtime::new().unwrap().block_on(async {
         let mut client = CalibrationServiceClient::connect(format!("http://{}", server.addr))

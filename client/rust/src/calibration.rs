@@ -52,6 +52,12 @@ pub struct MockCalibrationSpec {
     pub samples_per_pixel: u32,
     /// Adam iterations of the BSDF fit (0: the service's default, 300).
     pub fit_iterations: u32,
+    /// The part's metallic weight when its finish is known (1: bare metal), held by the fit
+    /// instead of fitted; `None`: fitted.
+    pub known_metallic: Option<f64>,
+    /// Start values of the BSDF fit, each in (0, 1), one fit per start, the best kept (empty:
+    /// the service's default, 0.5).
+    pub starts: Vec<f64>,
 }
 
 /// What the calibration reports while it runs.
@@ -193,7 +199,8 @@ pub async fn calibrate_mock_part(
             response: Some(response_to_message(&response)),
             views: (0..CALIBRATION_VIEWS as u32).collect(),
             iterations: spec.fit_iterations,
-            starts: Vec::new(),
+            starts: spec.starts.clone(),
+            known_metallic: spec.known_metallic,
         })
         .await
         .map_err(status)

@@ -109,8 +109,16 @@ pub fn fit_request(
             msg.starts[i]
         )));
     }
+    if let Some(m) = msg.known_metallic
+        && !(0.0..=1.0).contains(&m)
+    {
+        return Err(Status::invalid_argument(format!(
+            "known_metallic: is {m}, but must be in [0, 1] (1: bare metal, 0: a dielectric)"
+        )));
+    }
     let defaults = SceneFitConfig::default();
     let config = SceneFitConfig {
+        known_metallic: msg.known_metallic.map(|m| m as f32),
         views: msg.views.clone(),
         iterations,
         starts: if msg.starts.is_empty() {

@@ -20,7 +20,8 @@
 //! - Shiny metals: multi-path renders may be regularised (later vertices at least
 //!   `min_indirect_roughness` rough, [`LightTransport::regularised`]), the floor falling over
 //!   the iterations ([`FitConfig::final_min_indirect_roughness`]).
-//! - Free parameters: base_color, metallic, roughness, specular; the others stay at
+//! - Free parameters: base_color, metallic, roughness, specular (metallic held where the
+//!   finish is known, [`FitConfig::known_metallic`]); the others stay at
 //!   [`FitConfig::fixed`] (default: their lobes off, as the mock camera's metals have them).
 
 mod plot;
@@ -149,6 +150,12 @@ pub struct FitConfig {
     /// (Kaplanyan & Dachsbacher shrink it as the estimate converges, for the same reason).
     /// `None` keeps the floor fixed.
     pub final_min_indirect_roughness: Option<f32>,
+    /// The metallic weight, in [0, 1], when the part's finish is known: 1 for bare metal, 0
+    /// for a dielectric (paint, plastic). It is then held, not fitted; the other three
+    /// parameters are. Bare metal has no diffuse lobe, but a fit left free to add one can
+    /// trade it against base colour and specular (both scale F0) and still match the
+    /// radiance: the Gear's free fit gives metallic 0.78 for bare steel.
+    pub known_metallic: Option<f32>,
 }
 
 /// Seed step between iterations with [`FitConfig::reseed`].
@@ -170,6 +177,7 @@ impl Default for FitConfig {
             },
             reseed: false,
             final_min_indirect_roughness: None,
+            known_metallic: None,
         }
     }
 }
@@ -683,10 +691,13 @@ impl FitProblem<'_> {
             && (0.0..=1.0).contains(&config.start)
             && config
                 .final_min_indirect_roughness
-                .is_none_or(|r| (0.0..=1.0).contains(&r));
+                .is_none_or(|r| (0.0..=1.0).contains(&r))
+            && config
+                .known_metallic
+                .is_none_or(|m| (0.0..=1.0).contains(&m));
         if !valid {
             return Err(FitError::Config(format!(
-                "iterations must be ≥ 1, learning rates > 0, betas in [0, 1), start and final_min_indirect_roughness in [0, 1]; got {config:?}"
+                "iterations must be ≥ 1, learning rates > 0, betas in [0, 1), start, final_min_indirect_roughness and known_metallic in [0, 1]; got {config:?}"
             )));
         }
         config
@@ -696,6 +707,11 @@ impl FitProblem<'_> {
         let started = Instant::now();
         let lower = free_lower_bounds();
         let mut x: [f32; FREE] = std::array::from_fn(|i| config.start.max(lower[i]));
+        // Index 1 of the free parameters is metallic (FREE_NAMES).
+        let held = config.known_metallic.map(|m| (1, m));
+        if let Some((i, value)) = held {
+            x[i] = value;
+        }
         let (mut m, mut v) = ([0f64; FREE], [0f64; FREE]);
         let mut loss = Vec::with_capacity(config.iterations + 1);
         let mut trajectory = Vec::with_capacity(config.iterations + 1);
@@ -729,7 +745,7 @@ impl FitProblem<'_> {
             let lr = config.learning_rate as f64
                 * decay.powf(k as f64 / (config.iterations.max(2) - 1) as f64);
             let (b1, b2) = (config.beta1 as f64, config.beta2 as f64);
-            for i in 0..FREE {
+            for i in (0..FREE).filter(|&i| held.is_none_or(|(h, _)| h != i)) {
                 m[i] = b1 * m[i] + (1.0 - b1) * g[i];
                 v[i] = b2 * v[i] + (1.0 - b2) * g[i] * g[i];
                 let m_hat = m[i] / (1.0 - b1.powi(k as i32 + 1));

@@ -190,6 +190,9 @@ pub struct SceneFitConfig {
     pub final_min_indirect_roughness: f32,
     /// Start value of every free parameter, one fit per start; the best is kept.
     pub starts: Vec<f32>,
+    /// The metallic weight when the part's finish is known, held instead of fitted
+    /// ([`FitConfig::known_metallic`]).
+    pub known_metallic: Option<f32>,
 }
 
 impl Default for SceneFitConfig {
@@ -208,6 +211,7 @@ impl Default for SceneFitConfig {
             min_indirect_roughness: 0.5,
             final_min_indirect_roughness: 0.1,
             starts: vec![0.5],
+            known_metallic: None,
         }
     }
 }
@@ -452,6 +456,7 @@ pub fn fit_scene(
         iterations: config.iterations,
         reseed: config.reseed,
         final_min_indirect_roughness: Some(config.final_min_indirect_roughness),
+        known_metallic: config.known_metallic,
         ..FitConfig::default()
     };
     let iterations_total = config.iterations * config.starts.len();
@@ -502,7 +507,11 @@ pub fn fit_scene(
         "scene": capture.scene_dir,
         "obj_id": capture.obj_id,
         "views": im_ids,
-        "free": FREE_NAMES,
+        "free": FREE_NAMES
+            .iter()
+            .filter(|&&name| !(name == "metallic" && config.known_metallic.is_some()))
+            .collect::<Vec<_>>(),
+        "known_metallic": config.known_metallic,
         "transport": format!("{:?}", rendering.transport),
         "samples_per_pixel": rendering.samples_per_pixel,
         "residual": format!("{:?}", config.residual),

@@ -136,6 +136,11 @@ fn gradient_matches_central_differences() {
 
 /// Fits `truth` from 0.5 and returns the fit and the relative RMS radiance error.
 fn fit_of(truth: PrincipledParams<f32>) -> (FitResult, f64) {
+    fit_with(truth, &FitConfig::default())
+}
+
+/// [`fit_of`] with `config`.
+fn fit_with(truth: PrincipledParams<f32>, config: &FitConfig) -> (FitResult, f64) {
     let (scene, camera, projector) = sphere_setup();
     let target = target_of(&scene, &camera, &projector, &truth);
     let views = [FitView {
@@ -144,7 +149,7 @@ fn fit_of(truth: PrincipledParams<f32>) -> (FitResult, f64) {
         target,
     }];
     let problem = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
-    let result = problem.fit(&FitConfig::default()).unwrap();
+    let result = problem.fit(config).unwrap();
     let rendered = problem.render(&result.params);
     let (mut se, mut norm) = (0.0, 0.0);
     for (r, t) in rendered[0].iter().zip(&views[0].target.radiance) {
@@ -193,6 +198,44 @@ fn recovers_a_shiny_metal() {
         "diffuse albedo {}, {p:?}",
         diffuse_albedo(&p)
     );
+}
+
+#[test]
+fn a_known_metallic_is_held_and_the_others_fitted() {
+    // Bare metal stated by the user: metallic stays exactly 1 at every step, so F0 is the
+    // base colour itself and the fit must find it (and the roughness) alone.
+    let truth = PrincipledParams::new(0.78, 1.0, 0.16, 0.5).unwrap();
+    let config = FitConfig {
+        known_metallic: Some(1.0),
+        ..FitConfig::default()
+    };
+    let (result, rel_rms) = fit_with(truth, &config);
+    let p = result.params;
+    assert_eq!(p.metallic, 1.0);
+    assert!(result.trajectory.iter().all(|x| x[1] == 1.0));
+    assert!(
+        rel_rms < 0.02,
+        "relative RMS radiance error {rel_rms}, {p:?}"
+    );
+    // As for the free fit (`recovers_a_shiny_metal`): F0 within 3 %, roughness ± 0.02.
+    assert!((p.base_color / 0.78 - 1.0).abs() < 0.03, "{p:?}");
+    assert!((p.roughness - 0.16).abs() < 0.02, "{p:?}");
+    let out_of_range = FitConfig {
+        known_metallic: Some(1.5),
+        ..config
+    };
+    let (scene, camera, projector) = sphere_setup();
+    let target = target_of(&scene, &camera, &projector, &truth);
+    let views = [FitView {
+        camera,
+        projector,
+        target,
+    }];
+    let problem = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
+    assert!(matches!(
+        problem.fit(&out_of_range),
+        Err(FitError::Config(_))
+    ));
 }
 
 #[test]
