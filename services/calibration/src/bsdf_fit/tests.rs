@@ -45,6 +45,18 @@ fn sphere_setup() -> (Scene, Camera, Projector) {
     (scene, camera, projector)
 }
 
+/// [`sphere_setup`]'s scene and its one view, the target rendered with `truth` ([`target_of`]).
+fn sphere_view_of(truth: &PrincipledParams<f32>) -> (Scene, [FitView; 1]) {
+    let (scene, camera, projector) = sphere_setup();
+    let target = target_of(&scene, &camera, &projector, truth);
+    let view = FitView {
+        camera,
+        projector,
+        target,
+    };
+    (scene, [view])
+}
+
 /// The fit of instance 0's material in `views` of `scene`, rendered with `rendering`: L2 over
 /// pixels, same-sample residual (what most tests here vary one field of).
 fn sphere_problem<'a>(
@@ -96,16 +108,11 @@ fn sampled_target(
 
 #[test]
 fn gradient_matches_central_differences() {
-    let (scene, camera, projector) = sphere_setup();
     let truth = PrincipledParams::new(0.7, 0.4, 0.25, 0.6).unwrap();
-    let target = target_of(&scene, &camera, &projector, &truth);
+    let (scene, views) = sphere_view_of(&truth);
     // π (50 px)² / 4 ≈ 1960 pixels.
-    assert!(target.pixels.len() > 1800, "{}", target.pixels.len());
-    let views = [FitView {
-        camera,
-        projector,
-        target,
-    }];
+    let pixels = views[0].target.pixels.len();
+    assert!(pixels > 1800, "{pixels}");
     let problem = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
     let fixed = FitConfig::default().fixed;
     for at in [[0.5f32; FREE], [0.3, 0.7, 0.4, 0.2]] {
@@ -141,13 +148,7 @@ fn fit_of(truth: PrincipledParams<f32>) -> (FitResult, f64) {
 
 /// [`fit_of`] with `config`.
 fn fit_with(truth: PrincipledParams<f32>, config: &FitConfig) -> (FitResult, f64) {
-    let (scene, camera, projector) = sphere_setup();
-    let target = target_of(&scene, &camera, &projector, &truth);
-    let views = [FitView {
-        camera,
-        projector,
-        target,
-    }];
+    let (scene, views) = sphere_view_of(&truth);
     let problem = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
     let result = problem.fit(config).unwrap();
     let rendered = problem.render(&result.params);
@@ -224,13 +225,7 @@ fn a_known_metallic_is_held_and_the_others_fitted() {
         known_metallic: Some(1.5),
         ..config
     };
-    let (scene, camera, projector) = sphere_setup();
-    let target = target_of(&scene, &camera, &projector, &truth);
-    let views = [FitView {
-        camera,
-        projector,
-        target,
-    }];
+    let (scene, views) = sphere_view_of(&truth);
     let problem = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
     assert!(matches!(
         problem.fit(&out_of_range),
@@ -490,14 +485,8 @@ fn roughness_range_ends_where_its_derivative_vanishes() {
     let lower = free_lower_bounds()[2];
     assert!((lower * lower - glint_render::bsdf::ggx::MIN_ALPHA).abs() < 1e-9);
     // The Chrome Screw's near-mirror material on the sphere, single-path.
-    let (scene, camera, projector) = sphere_setup();
     let truth = PrincipledParams::new(0.92, 1.0, 0.06, 0.5).unwrap();
-    let target = target_of(&scene, &camera, &projector, &truth);
-    let views = [FitView {
-        camera,
-        projector,
-        target,
-    }];
+    let (scene, views) = sphere_view_of(&truth);
     let problem = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
     let fixed = FitConfig::default().fixed;
     // Below √α_min the GGX width is floored: the loss is flat, its derivative exactly 0.
@@ -558,13 +547,7 @@ fn regularised_multi_path_fit_recovers_a_shiny_metal_beside_a_wall() {
 
 #[test]
 fn regularisation_floor_falls_linearly_to_its_final_value() {
-    let (scene, camera, projector) = sphere_setup();
-    let target = target_of(&scene, &camera, &projector, &PrincipledParams::default());
-    let views = [FitView {
-        camera,
-        projector,
-        target,
-    }];
+    let (scene, views) = sphere_view_of(&PrincipledParams::default());
     let problem = sphere_problem(
         &scene,
         &views,
@@ -611,14 +594,8 @@ fn regularisation_floor_falls_linearly_to_its_final_value() {
 #[test]
 fn unbiased_l2_drops_the_renders_own_variance() {
     // Single-path renders are exact: the unbiased L2 is the plain one.
-    let (scene, camera, projector) = sphere_setup();
     let truth = PrincipledParams::new(0.78, 1.0, 0.16, 0.5).unwrap();
-    let target = target_of(&scene, &camera, &projector, &truth);
-    let views = [FitView {
-        camera,
-        projector,
-        target,
-    }];
+    let (scene, views) = sphere_view_of(&truth);
     let single = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
     let other = PrincipledParams::new(0.5, 0.8, 0.3, 0.5).unwrap();
     let plain = single.loss_and_gradient(&other, free_of(&other)).0;
@@ -676,14 +653,8 @@ fn unbiased_l2_drops_the_renders_own_variance() {
 
 #[test]
 fn fits_from_several_starts_are_judged_by_their_loss() {
-    let (scene, camera, projector) = sphere_setup();
     let truth = PrincipledParams::new(0.78, 1.0, 0.16, 0.5).unwrap();
-    let target = target_of(&scene, &camera, &projector, &truth);
-    let views = [FitView {
-        camera,
-        projector,
-        target,
-    }];
+    let (scene, views) = sphere_view_of(&truth);
     let problem = sphere_problem(&scene, &views, PixelRendering::SINGLE_PATH);
     let config = FitConfig {
         iterations: 20,
