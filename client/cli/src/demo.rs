@@ -302,6 +302,13 @@ async fn calibrate_once(args: &DemoArgs, addr: &str) -> anyhow::Result<(Calibrat
             "Calibration: cached in {} (delete it to calibrate again).",
             cache.dir.display()
         );
+        if args.calibration_known_metallic.is_some() || args.calibration_start != [0.5] {
+            tracing::warn!(
+                "--calibration-known-metallic and --calibration-start apply to a new calibration \
+                 only: the cached one in {} is used as it is",
+                cache.dir.display()
+            );
+        }
         let source = format!(
             "cached in {} by an earlier run, which fitted it through the calibration service",
             cache.dir.display()

@@ -47,6 +47,8 @@ use rayon::prelude::*;
 pub const FREE_NAMES: [&str; FREE] = ["base_color", "metallic", "roughness", "specular"];
 /// Number of free parameters.
 pub const FREE: usize = 4;
+/// Index of metallic in every `[f32; FREE]` ([`FREE_NAMES`]).
+const METALLIC: usize = 1;
 
 /// The lower end of each free parameter's range in the fit. Roughness stops at √α_min: below
 /// it the GGX width is floored ([`glint_render::bsdf::ggx::MIN_ALPHA`]), every roughness
@@ -156,6 +158,22 @@ pub struct FitConfig {
     /// trade it against base colour and specular (both scale F0) and still match the
     /// radiance: the Gear's free fit gives metallic 0.78 for bare steel.
     pub known_metallic: Option<f32>,
+}
+
+impl FitConfig {
+    /// The free parameter held at a known value, as (index in `[f32; FREE]`, value).
+    fn held(&self) -> Option<(usize, f32)> {
+        self.known_metallic.map(|m| (METALLIC, m))
+    }
+
+    /// Names of the parameters the fit changes: [`FREE_NAMES`] but the held one.
+    pub fn fitted_names(&self) -> Vec<&'static str> {
+        let held = self.held().map(|(i, _)| i);
+        (0..FREE)
+            .filter(|&i| Some(i) != held)
+            .map(|i| FREE_NAMES[i])
+            .collect()
+    }
 }
 
 /// Seed step between iterations with [`FitConfig::reseed`].
@@ -707,8 +725,7 @@ impl FitProblem<'_> {
         let started = Instant::now();
         let lower = free_lower_bounds();
         let mut x: [f32; FREE] = std::array::from_fn(|i| config.start.max(lower[i]));
-        // Index 1 of the free parameters is metallic (FREE_NAMES).
-        let held = config.known_metallic.map(|m| (1, m));
+        let held = config.held();
         if let Some((i, value)) = held {
             x[i] = value;
         }

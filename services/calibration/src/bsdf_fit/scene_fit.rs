@@ -20,8 +20,8 @@ use glint_render::scene::Scene;
 use nalgebra::Isometry3;
 
 use super::{
-    FREE_NAMES, FitConfig, FitError, FitProblem, FitResult, FitTarget, FitView, Loss,
-    MeasuredTarget, Residual, StartFit, StartFits, TargetError, measured_target,
+    FitConfig, FitError, FitProblem, FitResult, FitTarget, FitView, Loss, MeasuredTarget, Residual,
+    StartFit, StartFits, TargetError, measured_target,
 };
 use crate::material_map::params_to_map;
 use crate::response::{ExposureStack, ResponseError, ResponseTable};
@@ -507,10 +507,7 @@ pub fn fit_scene(
         "scene": capture.scene_dir,
         "obj_id": capture.obj_id,
         "views": im_ids,
-        "free": FREE_NAMES
-            .iter()
-            .filter(|&&name| !(name == "metallic" && config.known_metallic.is_some()))
-            .collect::<Vec<_>>(),
+        "free": fit_config.fitted_names(),
         "known_metallic": config.known_metallic,
         "transport": format!("{:?}", rendering.transport),
         "samples_per_pixel": rendering.samples_per_pixel,

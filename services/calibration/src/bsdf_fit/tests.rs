@@ -213,7 +213,12 @@ fn a_known_metallic_is_held_and_the_others_fitted() {
     let (result, rel_rms) = fit_with(truth, &config);
     let p = result.params;
     assert_eq!(p.metallic, 1.0);
-    assert!(result.trajectory.iter().all(|x| x[1] == 1.0));
+    assert!(result.trajectory.iter().all(|x| x[METALLIC] == 1.0));
+    assert_eq!(
+        config.fitted_names(),
+        ["base_color", "roughness", "specular"]
+    );
+    assert_eq!(FitConfig::default().fitted_names(), FREE_NAMES);
     assert!(
         rel_rms < 0.02,
         "relative RMS radiance error {rel_rms}, {p:?}"
