@@ -114,7 +114,7 @@ pub fn record_pattern_paths(
             row: RecordRow::default(),
         })
         .collect();
-    let (out, _) = render_with_sinks(scene, camera, &lit, settings, &mut sinks);
+    let (out, _) = render_with_sinks(scene, camera, &lit, settings, None, &mut sinks);
     let rows = sinks
         .into_iter()
         .map(|sink| {

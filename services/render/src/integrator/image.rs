@@ -51,7 +51,33 @@ pub fn render_with_single_path(
     settings: &RenderSettings,
 ) -> (RenderOutput, Image<f32>) {
     let mut sinks = vec![(); camera.intrinsics.height_px as usize];
-    render_with_sinks(scene, camera, projector, settings, &mut sinks)
+    render_with_sinks(scene, camera, projector, settings, None, &mut sinks)
+}
+
+/// [`render_with_single_path`] over only the pixels where `rendered` is true (a pixel past
+/// the mask's extent counts as true); the others stay as outside an ROI (0, NaN and label 0).
+/// For a caller that needs a few pixels of a crop, such as the part and the matcher's window
+/// around it. A row's random stream is drawn by its rendered pixels alone, so the estimates
+/// are a full render's in distribution, not to the bit.
+///
+/// # Panics
+/// When the camera's intrinsics have a zero side (see [`glint_geometry::camera::PinholeIntrinsics::new`]).
+pub fn render_with_single_path_where(
+    scene: &Scene,
+    camera: &Camera,
+    projector: &Projector,
+    settings: &RenderSettings,
+    rendered: &Image<bool>,
+) -> (RenderOutput, Image<f32>) {
+    let mut sinks = vec![(); camera.intrinsics.height_px as usize];
+    render_with_sinks(
+        scene,
+        camera,
+        projector,
+        settings,
+        Some(rendered),
+        &mut sinks,
+    )
 }
 
 /// Receives every next-event contribution of a render, one sink per image row: what
@@ -68,13 +94,15 @@ impl DirectSink for () {
     fn direct(&mut self, _: u32, _: Vec3A, _: f32) {}
 }
 
-/// [`render_with_single_path`], handing every next-event contribution of row v to `sinks[v]`
-/// (`sinks` has one entry per image row; rows without one are not rendered).
+/// [`render_with_single_path`] (over the pixels `rendered` allows, as
+/// [`render_with_single_path_where`]), handing every next-event contribution of row v to
+/// `sinks[v]` (`sinks` has one entry per image row; rows without one are not rendered).
 pub(crate) fn render_with_sinks<S: DirectSink>(
     scene: &Scene,
     camera: &Camera,
     projector: &Projector,
     settings: &RenderSettings,
+    rendered: Option<&Image<bool>>,
     sinks: &mut [S],
 ) -> (RenderOutput, Image<f32>) {
     let k = &camera.intrinsics;
@@ -106,6 +134,9 @@ pub(crate) fn render_with_sinks<S: DirectSink>(
                 );
                 let mut rays = 0u64;
                 for u in roi.u_min..roi.u_min + roi.width {
+                    if rendered.is_some_and(|m| m.get(u, v as u32) == Some(false)) {
+                        continue;
+                    }
                     let (mut sum, mut single_path_sum) = (0.0f32, 0.0f32);
                     for s in 0..spp {
                         let (d_c, direction) =

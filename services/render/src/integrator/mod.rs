@@ -32,6 +32,7 @@ pub use camera::Camera;
 pub(crate) use image::{DirectSink, render_with_sinks};
 pub use image::{
     RenderOutput, render, render_first_surface, render_labels, render_with_single_path,
+    render_with_single_path_where,
 };
 pub use pixel::{
     SinglePathSample, direct_light, path_pixel, path_pixel_frozen_sampling, single_path_pixel,

@@ -463,3 +463,44 @@ fn first_surface_render_is_the_shaded_renders_depth_and_label() {
         label.data()
     );
 }
+
+#[test]
+fn a_masked_render_shades_only_its_pixels() {
+    // An all-true mask draws the full render's random numbers in the same order: the same
+    // images to the bit. A partial mask leaves the other pixels as outside an ROI (0, NaN,
+    // label 0) and shades its own; the corner's inter-reflections make them multi-path.
+    let (scene, camera, projector) = corner_scene();
+    let settings = RenderSettings {
+        transport: LightTransport::MULTI_PATH_DEFAULT,
+        samples_per_pixel: 2,
+        roi: None,
+        seed: 5,
+    };
+    let (full, full_single) = render_with_single_path(&scene, &camera, &projector, &settings);
+    let bits = |image: &Image<f32>| image.data().iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let everything = full.label.map(|_| true);
+    let (same, same_single) =
+        render_with_single_path_where(&scene, &camera, &projector, &settings, &everything);
+    assert_eq!(bits(&same.radiance), bits(&full.radiance));
+    assert_eq!(bits(&same_single), bits(&full_single));
+    assert_eq!(same.rays_traced, full.rays_traced);
+
+    let (w, h) = (full.label.width(), full.label.height());
+    let left_half = Image::new(w, h, (0..w * h).map(|i| i % w < w / 2).collect()).unwrap();
+    let (half, half_single) =
+        render_with_single_path_where(&scene, &camera, &projector, &settings, &left_half);
+    let mut shaded = 0;
+    for (i, &keep) in left_half.data().iter().enumerate() {
+        if keep {
+            shaded += usize::from(half.radiance.data()[i] > 0.0);
+            assert!(half_single.data()[i] <= half.radiance.data()[i]);
+        } else {
+            assert_eq!(half.radiance.data()[i], 0.0);
+            assert_eq!(half_single.data()[i], 0.0);
+            assert!(half.depth_m.data()[i].is_nan());
+            assert_eq!(half.label.data()[i], 0);
+        }
+    }
+    assert!(shaded > 0);
+    assert!(half.rays_traced < full.rays_traced);
+}
