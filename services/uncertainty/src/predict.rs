@@ -846,7 +846,6 @@ mod tests {
     use glint_geometry::Part;
     use glint_geometry::image::normalised_intensity;
     use glint_geometry::sdf::{SdfConfig, SdfGrid};
-    use glint_geometry::silhouette::dilated;
     use glint_render::sensor::Sensor;
 
     /// The camera as a real calibration would find it: Debevec–Malik on an exposure stack of a
