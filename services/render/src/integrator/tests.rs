@@ -468,7 +468,7 @@ fn first_surface_render_is_the_shaded_renders_depth_and_label() {
 fn a_masked_render_shades_only_its_pixels() {
     // An all-true mask draws the full render's random numbers in the same order: the same
     // images to the bit. A partial mask leaves the other pixels as outside an ROI (0, NaN,
-    // label 0) and shades its own; the corner's inter-reflections make them multi-path.
+    // label 0), shades its own and traces fewer rays.
     let (scene, camera, projector) = corner_scene();
     let settings = RenderSettings {
         transport: LightTransport::MULTI_PATH_DEFAULT,
