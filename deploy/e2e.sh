@@ -128,34 +128,47 @@ fi
 sed 's/^/  /' "$out/undisturbed.txt"
 t_run1=$(python3 -c "import sys; print(f'{float(sys.argv[2]) - float(sys.argv[1]):.1f}')" "$t0" "$(date +%s.%N)")
 
-# 4. Again, with a worker killed as it starts rendering a decision.
-orch=$("${dc[@]}" ps -q orchestrator)
-mapfile -t worker_ids < <("${dc[@]}" ps -q uncertainty)
-since=$(date +%s)
-t0=$(date +%s.%N)
-say "session 2, killing a worker mid-decision"
-run_session killed & client_pid=$!
-if ! killed=$(python3 deploy/e2e.py kill-mid-decision "$orch" "$since" "${worker_ids[@]}"); then
-    wait $client_pid || true
-    cat "$out/killed.txt"; exit 1
-fi
-read -r killed_id started hung <<<"$killed"
-killed_name=$(docker inspect --format '{{.Name}}' "$killed_id" | tr -d /)
-if [[ $started == by-clock ]]; then
-    say "killed worker $killed_name, paused at the orchestrator's step 0, $hung s later (no CPU times visible: by the clock)"
-else
-    say "killed worker $killed_name mid-decision: paused at the orchestrator's step 0, the decision began $started s later on the other workers, which finished their share; its calls hung $hung s, then docker kill"
-fi
-if ! wait $client_pid; then
-    cat "$out/killed.txt"; exit 1
-fi
-sed 's/^/  /' "$out/killed.txt"
-t_run2=$(python3 -c "import sys; print(f'{float(sys.argv[2]) - float(sys.argv[1]):.1f}')" "$t0" "$(date +%s.%N)")
-resent=$(docker logs --since "$since" "$orch" 2>&1 | sed 's/\x1b\[[0-9;]*m//g' | grep 'worker failed a prediction' || true)
-if [[ -z $resent ]]; then
-    echo "e2e: the orchestrator re-sent nothing: the kill landed outside a decision's calls"
-    exit 1
-fi
+# 4. Again, with a worker killed as it starts rendering a decision. The harness pauses the
+# worker when it reads the orchestrator's step 0 in its logs; in one of six runs on this
+# 2-core machine the victim had no call of the next decision in flight when killed (that
+# decision ran on the other workers: nothing to re-send). Such a run says nothing about
+# re-sending, so it is tried once more with a fresh session (and one worker fewer); a
+# second run without a re-send fails.
+for attempt in 1 2; do
+    orch=$("${dc[@]}" ps -q orchestrator)
+    # Running workers only: a second attempt must not pick the one killed before.
+    mapfile -t worker_ids < <(docker ps -q --filter "label=com.docker.compose.project=$project" --filter label=com.docker.compose.service=uncertainty)
+    sleep 1 # `docker logs --since` counts whole seconds: nothing of the session before
+    since=$(date +%s)
+    t0=$(date +%s.%N)
+    say "session 2, killing a worker mid-decision (attempt $attempt)"
+    run_session killed & client_pid=$!
+    if ! killed=$(python3 deploy/e2e.py kill-mid-decision "$orch" "$since" "${worker_ids[@]}"); then
+        wait $client_pid || true
+        cat "$out/killed.txt"; exit 1
+    fi
+    read -r killed_id started hung <<<"$killed"
+    killed_name=$(docker inspect --format '{{.Name}}' "$killed_id" | tr -d /)
+    if [[ $started == by-clock ]]; then
+        say "killed worker $killed_name, paused at the orchestrator's step 0, $hung s later (no CPU times visible: by the clock)"
+    else
+        say "killed worker $killed_name mid-decision: paused at the orchestrator's step 0, the decision began $started s later on the other workers, which finished their share; its calls hung $hung s, then docker kill"
+    fi
+    if ! wait $client_pid; then
+        cat "$out/killed.txt"; exit 1
+    fi
+    sed 's/^/  /' "$out/killed.txt"
+    t_run2=$(python3 -c "import sys; print(f'{float(sys.argv[2]) - float(sys.argv[1]):.1f}')" "$t0" "$(date +%s.%N)")
+    resent=$(docker logs --since "$since" "$orch" 2>&1 | sed 's/\x1b\[[0-9;]*m//g' | grep 'worker failed a prediction' || true)
+    if [[ -n $resent ]]; then
+        break
+    fi
+    if [[ $attempt -eq 2 ]]; then
+        echo "e2e: the orchestrator re-sent nothing, twice: the kill landed outside a decision's calls"
+        exit 1
+    fi
+    say "the orchestrator re-sent nothing: the kill landed outside a decision's calls (no call in flight on the victim); once more"
+done
 say "the orchestrator re-sent the killed worker's calls:"
 echo "$resent" | sed 's/^/  /'
 say "workers now: $(docker ps --filter "label=com.docker.compose.project=$project" --filter label=com.docker.compose.service=uncertainty --format '{{.Names}}' | sort | tr '\n' ' ')"
