@@ -7,7 +7,7 @@
 //!    each camera, through the calibrated response (eq 14–15), both from one multi-path trace
 //!    (the single-path image is its paths' first-vertex terms), shaded only where the part is
 //!    and the matcher's windows reach around it (the crop's other pixels get centre rays
-//!    only: 1.2–1.8× faster decisions);
+//!    only; the README's `glint bench nbv` section measures what that saves);
 //! 2. a left pixel is **missing by the ratio test** when `I_single / I_multi < τ_I` (eq 16):
 //!    inter-reflected light swamps the pattern's direct signal (a projector shadow has
 //!    `I_single = 0`);
