@@ -33,7 +33,7 @@ fn eval_refine_writes_auditable_results() {
     let out = dir.path().join("table");
     let args = argv(
         "eval refine --parts eye-bolt --scenes 1 --views-per-scene 2 --views 1,2 --instances 4 \
-        --spp 1 --tune-scenes 1 --icp-distances-mm 5,10 --out {}",
+        --spp 1 --tune-scenes 1 --view-bias-scenes 1 --icp-distances-mm 5,10 --out {}",
         &[out.to_str().unwrap()],
     );
     let o = glint(&args);
@@ -97,7 +97,13 @@ fn eval_refine_writes_auditable_results() {
         table.contains("| initial pose |") && table.contains("2 views — ICP"),
         "{table}"
     );
-    assert!(out.join("nees.csv").exists());
+    let nees = std::fs::read_to_string(out.join("nees.csv")).unwrap();
+    assert!(
+        nees.lines()
+            .next()
+            .is_some_and(|h| h.ends_with("mean_nees_view_bias,median_nees_view_bias")),
+        "{nees}"
+    );
     // The refiner's own verdict is tallied per part and view count, flagged ≤ all trials.
     let notice = std::fs::read_to_string(out.join("notice.csv")).unwrap();
     let all_1 = notice

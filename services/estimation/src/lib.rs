@@ -9,6 +9,7 @@
 //!   (eq 8–11) and the pose covariance from the Fisher information (eq 18–19);
 //! - [`icp`]: the ICP baseline (point-to-point and point-to-plane) on the same inputs;
 //! - [`nbv`]: next-best-view planning by minimum pose entropy (eq 20–23) and the heuristics;
+//! - [`view_bias`]: a pose error one view's points share, and the multi-view information left;
 //! - [`view`]: one captured view → the part's depth points under a pose hypothesis;
 //! - [`multiview`]: a session's views → one refined pose with its information (the two-pass
 //!   hypothesis-silhouette masking the in-process stage and the `Refine` RPC share).
@@ -30,3 +31,4 @@ pub mod refine;
 #[cfg(feature = "server")]
 pub mod server;
 pub mod view;
+pub mod view_bias;

@@ -38,6 +38,17 @@ pub fn closest_symmetric_gt(
     best
 }
 
+/// The error of `t_o_w_est` as the refiner's left perturbation, `δ = log(T_est · T_gt⁻¹)`
+/// (object frame, translation first), against the closest symmetric truth.
+pub fn symmetric_error(
+    t_o_w_est: &Isometry3<f64>,
+    t_o_w_gt: &Isometry3<f64>,
+    symmetry: &Symmetry,
+) -> Vector6<f64> {
+    let gt = closest_symmetric_gt(t_o_w_est, t_o_w_gt, symmetry);
+    se3::log(&(t_o_w_est * gt.inverse()))
+}
+
 /// Normalised estimation error squared of a refined `t_o_w_est` against the truth, with the
 /// refiner's Fisher information (eq 18): `δᵀ I δ`, `δ = log(T_est · T_gt⁻¹)` (the left
 /// perturbation the information is expressed in) against the closest symmetric truth.
@@ -49,8 +60,7 @@ pub fn nees(
     information: &Matrix6<f64>,
     symmetry: &Symmetry,
 ) -> (f64, usize) {
-    let gt = closest_symmetric_gt(t_o_w_est, t_o_w_gt, symmetry);
-    let delta: Vector6<f64> = se3::log(&(t_o_w_est * gt.inverse()));
+    let delta = symmetric_error(t_o_w_est, t_o_w_gt, symmetry);
     let value = (delta.transpose() * information * delta)[(0, 0)];
     let dof = if symmetry.continuous_axis().is_some() {
         5

@@ -20,16 +20,19 @@ use glint_estimation::points::DepthPoint;
 use glint_estimation::refine::{
     REFINE_SDF_PADDING_MM, SdfRefineConfig, refine_grid_config, refine_sdf,
 };
+use glint_estimation::view_bias::{
+    SingleViewError, ViewBiasFit, ViewInformation, ViewPoseBias, measure_view_bias,
+};
 use glint_geometry::io::write_file_atomically;
 use glint_geometry::pose_deviation::{CorrectThreshold, PoseDeviation, pose_deviation};
 use glint_geometry::sdf::{SdfConfig, SdfGrid};
 use glint_geometry::{LengthUnit, Part, Symmetry};
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Matrix6, Point3};
 use rand::SeedableRng;
 use rand::seq::IndexedRandom;
 
 use crate::initial_pose::InitialPoseNoise;
-use crate::metrics::{chi2_mean_band, mcnemar_exact_p, mean, median, nees};
+use crate::metrics::{chi2_mean_band, mcnemar_exact_p, mean, median, nees, symmetric_error};
 use crate::scenes::{
     EvalObject, LoadedScene, OBJ_ID, SceneSpec, ensure_scene, eval_objects, load_scene,
 };
@@ -67,6 +70,9 @@ pub struct RefineExperiment {
     pub sdf_gates_mm: Vec<f64>,
     /// Tuning scenes per part for ICP's distance (seeds disjoint from the evaluation's).
     pub tune_scenes: u32,
+    /// Tuning scenes per part the per-view pose bias is measured on (the first
+    /// `tune_scenes` of them are the refiners' tuning scenes; all disjoint from the evaluation's).
+    pub view_bias_scenes: u32,
     /// Control: paint the parts with the matte diffuse twin (scenes cached separately).
     pub matte: bool,
     /// Every refiner starts from the initial pose moved along the viewing rays onto the depth
@@ -173,9 +179,12 @@ pub struct Outcome {
     iterations: usize,
     time_ms: f64,
     status: String,
-    /// NEES under eq 18's independent pixels, and under the measured correlated depth error;
-    /// with its degrees of freedom.
+    /// NEES under eq 18's independent pixels, under the measured correlated depth error and
+    /// under that plus the measured per-view pose bias; with its degrees of freedom.
     nees: Option<Nees>,
+    /// The SDF result's information per view (correlated depth error) with each view's
+    /// camera at the refined pose; empty for the other methods.
+    views_information: Vec<ViewInformation>,
     /// The SDF refiner's own verdict that it made its start worse ([`glint_estimation::refine::RefineResult::cost_rose`]); false for the others.
     cost_rose: bool,
 }
@@ -188,6 +197,9 @@ struct Nees {
     /// Against [`information_with_correlated_error`]'s, with the model measured on the tuning
     /// scenes.
     correlated: f64,
+    /// Against the correlated information with the part's per-view pose bias
+    /// ([`ViewPoseBias::information`]), measured on the tuning scenes' single views.
+    view_bias: f64,
     dof: usize,
 }
 
@@ -230,14 +242,22 @@ fn trials_of_scene(
     out
 }
 
-/// The trial's instance's points, one slice per view (a shared depth bias stays within a view).
-fn trial_view_points<'a>(trial: &Trial, scene: &'a LoadedScene) -> Vec<&'a [DepthPoint]> {
+/// The trial's instance's points, one slice per view (a shared depth bias stays within a view),
+/// each with its view's camera `t_w_c`.
+fn trial_view_points<'a>(
+    trial: &Trial,
+    scene: &'a LoadedScene,
+) -> Vec<(&'a [DepthPoint], Isometry3<f64>)> {
     scene
         .views
         .iter()
         .filter(|v| trial.views.contains(&v.im_id))
-        .flat_map(|v| v.objects.iter().filter(|o| o.instance == trial.instance))
-        .map(|o| o.points.as_slice())
+        .flat_map(|v| {
+            v.objects
+                .iter()
+                .filter(|o| o.instance == trial.instance)
+                .map(|o| (o.points.as_slice(), v.t_w_c))
+        })
         .collect()
 }
 
@@ -276,11 +296,15 @@ struct Tunings {
     sdf: SettingTuning,
     /// The correlated depth error.
     depth_error: CorrelatedErrorFit,
+    /// Each part's per-view pose bias (`None`: no single-view refinement was correct).
+    view_bias: Vec<Option<ViewBiasFit>>,
 }
 
 struct Refiners {
     sdf: SdfGrid,
     icp_model: IcpModel,
+    /// The part's per-view pose bias, measured on the tuning scenes (none until then).
+    view_bias: ViewPoseBias,
 }
 
 /// The ICP settings of each variant: point-to-point, point-to-plane.
@@ -325,7 +349,10 @@ fn run_trial(
     let t_o_w_gt = (t_w_c * trial.t_c_o_gt).inverse();
     let view_points = trial_view_points(trial, scene);
     // Stacked over the views (eq 7, 19).
-    let points: Vec<DepthPoint> = view_points.iter().flat_map(|v| v.iter().copied()).collect();
+    let points: Vec<DepthPoint> = view_points
+        .iter()
+        .flat_map(|(v, _)| v.iter().copied())
+        .collect();
     // Every refiner's start: the detector's pose moved along its own camera's rays onto that
     // view's depth (the other views' rays would spread the search across the detector's
     // accurate axes).
@@ -356,6 +383,7 @@ fn run_trial(
             time_ms,
             status,
             nees: n,
+            views_information: Vec::new(),
             cost_rose: false,
         }
     };
@@ -374,21 +402,32 @@ fn run_trial(
                     Ok(r) => {
                         let (independent, dof) =
                             nees(&r.t_o_w, &t_o_w_gt, &r.information, symmetry);
-                        let correlated = information_with_correlated_error(
-                            &refiners.sdf,
-                            &view_points,
-                            &r.t_o_w,
-                            &settings.sdf,
-                            &settings.depth_error,
-                        );
+                        let views_information: Vec<ViewInformation> = view_points
+                            .iter()
+                            .map(|(points, t_w_c)| ViewInformation {
+                                information: information_with_correlated_error(
+                                    &refiners.sdf,
+                                    &[points],
+                                    &r.t_o_w,
+                                    &settings.sdf,
+                                    &settings.depth_error,
+                                ),
+                                t_o_c: r.t_o_w * t_w_c,
+                            })
+                            .collect();
+                        let correlated: Matrix6<f64> =
+                            views_information.iter().map(|v| v.information).sum();
+                        let biased = refiners.view_bias.information(&views_information);
                         let n = Nees {
                             independent,
                             correlated: nees(&r.t_o_w, &t_o_w_gt, &correlated, symmetry).0,
+                            view_bias: nees(&r.t_o_w, &t_o_w_gt, &biased, symmetry).0,
                             dof,
                         };
                         let status = format!("{:?}", r.status).to_lowercase();
                         let mut o = outcome(method, r.t_o_w, r.iterations, ms, status, Some(n));
                         o.cost_rose = r.cost_rose();
+                        o.views_information = views_information;
                         o
                     }
                     // A failed refinement keeps the initial pose, flagged.
@@ -516,7 +555,11 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
             .with_context(|| format!("SDF of {}", object.name))?;
         let icp_model = IcpModel::from_mesh(&object.mesh, 50_000, args.seed)
             .with_context(|| format!("ICP model of {}", object.name))?;
-        refiners.push(Refiners { sdf, icp_model });
+        refiners.push(Refiners {
+            sdf,
+            icp_model,
+            view_bias: ViewPoseBias::none(),
+        });
     }
 
     // 1. Each refiner's one free setting by its best 2 mm/2° rate (all parts, all view counts)
@@ -630,6 +673,25 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
         depth_error: depth_error_fit.best,
         align_depth: args.align_depth,
     };
+    let mut bias_scenes = Vec::new();
+    for (index, object) in objects.iter().enumerate() {
+        for s in 0..args.view_bias_scenes {
+            let seed = tune_seed(s);
+            bias_scenes.push((index, seed, ensure_scene(&scene_root, object, seed, &spec)?));
+        }
+    }
+    let view_bias = measure_view_biases(
+        &objects,
+        &bias_scenes,
+        &mut refiners,
+        &settings,
+        &LoadSettings {
+            window_radius_px,
+            erode_px,
+            noise: &noise,
+            seed: args.seed,
+        },
+    )?;
 
     // 2. The evaluation.
     let mut all: Vec<(Trial, Vec<Outcome>)> = Vec::new();
@@ -665,8 +727,82 @@ pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
             icp: tunings,
             sdf: sdf_tuning,
             depth_error: depth_error_fit,
+            view_bias,
         },
     )
+}
+
+/// How the tuning scenes are read and their trials drawn.
+struct LoadSettings<'a> {
+    window_radius_px: u32,
+    erode_px: u32,
+    noise: &'a InitialPoseNoise,
+    seed: u64,
+}
+
+/// Each part's per-view pose bias from the tuning scenes: the SDF refiner's single-view
+/// results that are correct at 5 mm/5° (the NEES's own selection), their errors against the
+/// truth with the information the refiner (with the correlated depth error) gave them; sets
+/// each part's [`Refiners::view_bias`].
+fn measure_view_biases(
+    objects: &[EvalObject],
+    tune_scenes: &[(usize, u64, PathBuf)],
+    refiners: &mut [Refiners],
+    settings: &RefinerSettings,
+    load: &LoadSettings<'_>,
+) -> anyhow::Result<Vec<Option<ViewBiasFit>>> {
+    let mut samples: Vec<Vec<SingleViewError>> = vec![Vec::new(); objects.len()];
+    let bar = crate::progress::bar(tune_scenes.len() as u64, "measure view bias");
+    for &(index, seed, ref dir) in tune_scenes {
+        let object = &objects[index];
+        let scene = load_scene(dir, OBJ_ID, load.window_radius_px, load.erode_px)?;
+        for trial in trials_of_scene(object, seed, &scene, &[1], load.noise, load.seed) {
+            let outcomes = run_trial(
+                &trial,
+                &scene,
+                &refiners[index],
+                settings,
+                &object.symmetry,
+                &[RefineMethod::Sdf],
+            );
+            let Some(o) = outcomes.first() else { continue };
+            let [view] = o.views_information[..] else {
+                continue;
+            };
+            if !o.deviation.is_correct(&CorrectThreshold::MM5_DEG5) {
+                continue;
+            }
+            let t_w_c = scene.views[trial.reference].t_w_c;
+            let t_o_w_est = (t_w_c * o.t_c_o).inverse();
+            let t_o_w_gt = (t_w_c * trial.t_c_o_gt).inverse();
+            samples[index].push(SingleViewError {
+                error_o: symmetric_error(&t_o_w_est, &t_o_w_gt, &object.symmetry),
+                information: view.information,
+                t_o_c: view.t_o_c,
+            });
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let fits: Vec<Option<ViewBiasFit>> = samples.iter().map(|s| measure_view_bias(s)).collect();
+    for ((object, refiner), fit) in objects.iter().zip(refiners.iter_mut()).zip(&fits) {
+        if let Some(fit) = fit {
+            refiner.view_bias = fit.bias;
+            let (t, r) = fit.bias.sigmas();
+            tracing::info!(
+                "{}: per-view pose bias σ_t ({:.3}, {:.3}, {:.3}) mm, σ_r ({:.3}, {:.3}, {:.3})° from {} single views",
+                object.name,
+                t[0] * 1e3,
+                t[1] * 1e3,
+                t[2] * 1e3,
+                r[0].to_degrees(),
+                r[1].to_degrees(),
+                r[2].to_degrees(),
+                fit.samples
+            );
+        }
+    }
+    Ok(fits)
 }
 
 /// Cell edges over which [`fit_correlated_error`] looks for a shared depth bias, mm (∞: one
@@ -742,7 +878,7 @@ fn write_outputs(
         "part,scene_seed,views,instance,method,gt_t_mm_x,gt_t_mm_y,gt_t_mm_z,gt_qw,gt_qx,gt_qy,gt_qz,\
          init_t_mm_x,init_t_mm_y,init_t_mm_z,init_qw,init_qx,init_qy,init_qz,\
          est_t_mm_x,est_t_mm_y,est_t_mm_z,est_qw,est_qx,est_qy,est_qz,\
-         translation_error_mm,rotation_error_deg,iterations,time_ms,status,nees,nees_dof,nees_correlated,cost_rose\n",
+         translation_error_mm,rotation_error_deg,iterations,time_ms,status,nees,nees_dof,nees_correlated,nees_view_bias,cost_rose\n",
     );
     let pose = |p: &Isometry3<f64>| {
         let t = p.translation.vector * 1e3;
@@ -760,18 +896,17 @@ fn write_outputs(
             .collect::<Vec<_>>()
             .join(" ");
         for o in outcomes {
-            let (n, dof, nc) = o
-                .nees
-                .map_or((String::new(), String::new(), String::new()), |n| {
-                    (
-                        format!("{:.4}", n.independent),
-                        n.dof.to_string(),
-                        format!("{:.4}", n.correlated),
-                    )
-                });
+            let (n, dof, nc, nb) = o.nees.map_or(Default::default(), |n| {
+                (
+                    format!("{:.4}", n.independent),
+                    n.dof.to_string(),
+                    format!("{:.4}", n.correlated),
+                    format!("{:.4}", n.view_bias),
+                )
+            });
             writeln!(
                 trials_csv,
-                "{},{},{views},{},{},{},{},{},{:.4},{:.4},{},{:.3},\"{}\",{n},{dof},{nc},{}",
+                "{},{},{views},{},{},{},{},{},{:.4},{:.4},{},{:.3},\"{}\",{n},{dof},{nc},{nb},{}",
                 t.object,
                 t.scene_seed,
                 t.instance,
@@ -1076,9 +1211,11 @@ fn write_outputs(
          *eq 18*: independent pixels (the paper's). *correlated*: a depth bias shared by one view's points within a \
          world cell (`glint_estimation::correlated_error`), measured by maximum likelihood on the tuning scenes' \
          instances at their true poses ({} points): {cell}, σ_b = {:.3} mm (log-likelihood gain over independent \
-         errors {:.0}).\n\n\
-         | part | views | n | dof | 95 % band | mean NEES eq 18 | median eq 18 | mean NEES correlated | median correlated |\n\
-         |---|---:|---:|---:|---|---:|---:|---:|---:|",
+         errors {:.0}). *+ view bias*: the correlated model plus a pose error shared by all of one view's points \
+         (`glint_estimation::view_bias`), measured per part on the tuning scenes' correct single-view refinements \
+         (table below).\n\n\
+         | part | views | n | dof | 95 % band | mean NEES eq 18 | median eq 18 | mean NEES correlated | median correlated | mean NEES + view bias | median + view bias |\n\
+         |---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|",
         fit.points,
         fit.best.bias_sigma_m * 1e3,
         fit.per_cell_size
@@ -1088,7 +1225,8 @@ fn write_outputs(
             - fit.independent_log_likelihood,
     )?;
     let mut nees_csv = String::from(
-        "part,views,n,dof,band_lo,band_hi,mean_nees,median_nees,mean_nees_correlated,median_nees_correlated\n",
+        "part,views,n,dof,band_lo,band_hi,mean_nees,median_nees,mean_nees_correlated,median_nees_correlated,\
+         mean_nees_view_bias,median_nees_view_bias\n",
     );
     for g in &groups {
         for &k in &args.views {
@@ -1107,13 +1245,16 @@ fn write_outputs(
             let correlated: Vec<f64> = values.iter().map(|v| v.correlated).collect();
             let (mean_i, med_i) = (mean(&independent), median(independent.clone()));
             let (mean_c, med_c) = (mean(&correlated), median(correlated.clone()));
+            let biased: Vec<f64> = values.iter().map(|v| v.view_bias).collect();
+            let (mean_b, med_b) = (mean(&biased), median(biased.clone()));
             writeln!(
                 table,
-                "| {g} | {k} | {n} | {dof} | [{lo:.2}, {hi:.2}] | {mean_i:.2} | {med_i:.2} | {mean_c:.2} | {med_c:.2} |"
+                "| {g} | {k} | {n} | {dof} | [{lo:.2}, {hi:.2}] | {mean_i:.2} | {med_i:.2} | {mean_c:.2} | {med_c:.2} | \
+                 {mean_b:.2} | {med_b:.2} |"
             )?;
             writeln!(
                 nees_csv,
-                "{g},{k},{n},{dof},{lo:.4},{hi:.4},{mean_i:.4},{med_i:.4},{mean_c:.4},{med_c:.4}"
+                "{g},{k},{n},{dof},{lo:.4},{hi:.4},{mean_i:.4},{med_i:.4},{mean_c:.4},{med_c:.4},{mean_b:.4},{med_b:.4}"
             )?;
         }
     }
@@ -1140,6 +1281,36 @@ fn write_outputs(
         "| independent | 0 | {:.0} | |",
         fit.independent_log_likelihood
     )?;
+    writeln!(
+        table,
+        "\nThe per-view pose bias B per part (standard deviations along the camera axes, z the optical axis; \
+         the second moment of the tuning single views' errors less the covariance the refiner predicted for them, \
+         the last column is that predicted share of the second moment, the mean over its diagonal):\n\n\
+         | part | single views | σ_t x, y, z mm | σ_r x, y, z ° | predicted / second moment |\n|---|---:|---|---|---:|"
+    )?;
+    for (object, fit) in objects.iter().zip(&tuned.view_bias) {
+        let Some(fit) = fit else {
+            writeln!(table, "| {} | 0 | – | – | – |", object.name)?;
+            continue;
+        };
+        let (t, r) = fit.bias.sigmas();
+        writeln!(
+            table,
+            "| {} | {} | {:.3}, {:.3}, {:.3} | {:.3}, {:.3}, {:.3} | {:.4} |",
+            object.name,
+            fit.samples,
+            t[0] * 1e3,
+            t[1] * 1e3,
+            t[2] * 1e3,
+            r[0].to_degrees(),
+            r[1].to_degrees(),
+            r[2].to_degrees(),
+            (0..6)
+                .map(|i| fit.predicted_c[(i, i)] / fit.second_moment_c[(i, i)])
+                .sum::<f64>()
+                / 6.0,
+        )?;
+    }
     let timing: Vec<String> = RefineMethod::REFINERS
         .iter()
         .map(|m| {

@@ -4,7 +4,7 @@
 //! `T ← exp(ξ)·T`. This module is the only owner of that convention.
 
 use nalgebra::{
-    Isometry3, Matrix3, Matrix3x6, Point3, Translation3, UnitQuaternion, Vector3, Vector6,
+    Isometry3, Matrix3, Matrix3x6, Matrix6, Point3, Translation3, UnitQuaternion, Vector3, Vector6,
 };
 
 /// `[v]×`, the cross-product matrix: `[v]× w = v × w`.
@@ -55,6 +55,19 @@ pub fn perturb_left(delta: &Vector6<f64>, t: &Isometry3<f64>) -> Isometry3<f64> 
     exp(delta) * t
 }
 
+/// The adjoint of `t = t_a_b` on twists, `Ad(t) = [[R, [t]× R], [0, R]]` (translation first):
+/// `exp(Ad(t)·ξ) = t·exp(ξ)·t⁻¹`, so a left perturbation expressed in frame b becomes the same
+/// perturbation expressed in frame a; a covariance moves as `Ad Σ Adᵀ`.
+pub fn adjoint(t: &Isometry3<f64>) -> Matrix6<f64> {
+    let r = t.rotation.to_rotation_matrix().into_inner();
+    let mut ad = Matrix6::zeros();
+    ad.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
+    ad.fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&(skew(&t.translation.vector) * r));
+    ad.fixed_view_mut::<3, 3>(3, 3).copy_from(&r);
+    ad
+}
+
 /// `∂(exp(δ)·p)/∂δ` at δ = 0: `[I | −[p]×]` (used by eq 10).
 #[inline]
 pub fn point_jacobian_left(p: &Point3<f64>) -> Matrix3x6<f64> {
@@ -69,6 +82,20 @@ pub fn point_jacobian_left(p: &Point3<f64>) -> Matrix3x6<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_adjoint_moves_a_perturbation_between_frames() {
+        // exp(Ad(t)·ξ) = t·exp(ξ)·t⁻¹ to rounding, for poses away from the identity.
+        let t = exp(&Vector6::new(0.3, -0.2, 0.5, 0.4, -0.7, 1.1));
+        for xi in twists()
+            .iter()
+            .filter(|x| x.fixed_rows::<3>(3).norm() < 2.0)
+        {
+            let lhs = exp(&(adjoint(&t) * xi));
+            let rhs = t * exp(xi) * t.inverse();
+            assert!((log(&(lhs * rhs.inverse()))).norm() < 1e-9, "{xi:?}");
+        }
+    }
 
     fn twists() -> Vec<Vector6<f64>> {
         vec![

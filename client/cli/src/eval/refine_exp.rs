@@ -52,6 +52,11 @@ pub struct RefineArgs {
     /// from the evaluation's).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub tune_scenes: u32,
+    /// Tuning scenes per part on which the per-view pose bias of the NEES's last column is
+    /// measured (the first --tune-scenes are the refiners' tuning scenes; seeds disjoint from
+    /// the evaluation's).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub view_bias_scenes: u32,
     /// Control experiment: paint the parts with the matte diffuse twin instead of their
     /// ground-truth metal (scenes are cached separately).
     #[arg(long)]
@@ -102,6 +107,7 @@ pub fn run(args: &RefineArgs) -> anyhow::Result<()> {
         icp_distances_mm: args.icp_distances_mm.clone(),
         sdf_gates_mm: args.sdf_gates_mm.clone(),
         tune_scenes: args.tune_scenes,
+        view_bias_scenes: args.view_bias_scenes,
         matte: args.matte,
         align_depth: !args.no_align_depth,
         shots: args.shots,
