@@ -468,7 +468,7 @@ fn first_surface_render_is_the_shaded_renders_depth_and_label() {
 fn a_masked_render_shades_only_its_pixels() {
     // An all-true mask draws the full render's random numbers in the same order: the same
     // images to the bit. A partial mask leaves the other pixels as outside an ROI (0, NaN,
-    // label 0), shades its own and traces fewer rays.
+    // label 0), shades its own and traces fewer rays; pixels past its extent are rendered.
     let (scene, camera, projector) = corner_scene();
     let settings = RenderSettings {
         transport: LightTransport::MULTI_PATH_DEFAULT,
@@ -503,4 +503,20 @@ fn a_masked_render_shades_only_its_pixels() {
     }
     assert!(shaded > 0);
     assert!(half.rays_traced < full.rays_traced);
+
+    // A pixel past the mask's extent counts as allowed: an all-false mask as wide as the left
+    // half renders the right half alone. The centre ray (sample 0) draws no random numbers, so
+    // depth and labels there are the full render's to the bit.
+    let narrow = Image::new(w / 2, h, vec![false; (w / 2 * h) as usize]).unwrap();
+    let (right, _) =
+        render_with_single_path_where(&scene, &camera, &projector, &settings, &narrow);
+    for (i, (&d, &label)) in right.depth_m.data().iter().zip(right.label.data()).enumerate() {
+        if (i as u32 % w) < w / 2 {
+            assert!(d.is_nan() && label == 0);
+        } else {
+            assert_eq!(d.to_bits(), full.depth_m.data()[i].to_bits());
+            assert_eq!(label, full.label.data()[i]);
+        }
+    }
+    assert!(right.label.data().iter().any(|&l| l != 0));
 }
