@@ -44,6 +44,13 @@ pub struct ActiveArgs {
     /// rays onto the depth (the alignment is on by default).
     #[arg(long)]
     pub no_align_depth: bool,
+    /// The margin around the hypothesis' silhouette of the first masking pass, mm (the
+    /// sessions' default: 10, the detector's error).
+    #[arg(long, default_value_t = 10.0, value_parser = parse_margin_mm)]
+    pub mask_margin_mm: f64,
+    /// The margin around the first pass's refined silhouette of the second pass, mm.
+    #[arg(long, default_value_t = 3.0, value_parser = parse_margin_mm)]
+    pub final_mask_margin_mm: f64,
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -69,6 +76,8 @@ pub fn run_cmd(args: &ActiveArgs) -> anyhow::Result<()> {
         samples_per_pixel: args.bin.spp,
         masking: Masking {
             align_depth: !args.no_align_depth,
+            margin_m: args.mask_margin_mm * 1e-3,
+            final_margin_m: args.final_mask_margin_mm * 1e-3,
             ..Masking::default()
         },
         predict_with_bin: args.predict_bin,
@@ -207,4 +216,16 @@ fn plot_png(rows: &[StepRow], policies: &[ViewPolicy], views: usize) -> anyhow::
         }
         Ok(())
     })?)
+}
+
+/// A mask margin in mm: finite, in [0, 100].
+fn parse_margin_mm(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of millimetres"))?;
+    if v.is_finite() && (0.0..=100.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} mm must be between 0 and 100"))
+    }
 }

@@ -508,9 +508,14 @@ fn a_masked_render_shades_only_its_pixels() {
     // half renders the right half alone. The centre ray (sample 0) draws no random numbers, so
     // depth and labels there are the full render's to the bit.
     let narrow = Image::new(w / 2, h, vec![false; (w / 2 * h) as usize]).unwrap();
-    let (right, _) =
-        render_with_single_path_where(&scene, &camera, &projector, &settings, &narrow);
-    for (i, (&d, &label)) in right.depth_m.data().iter().zip(right.label.data()).enumerate() {
+    let (right, _) = render_with_single_path_where(&scene, &camera, &projector, &settings, &narrow);
+    for (i, (&d, &label)) in right
+        .depth_m
+        .data()
+        .iter()
+        .zip(right.label.data())
+        .enumerate()
+    {
         if (i as u32 % w) < w / 2 {
             assert!(d.is_nan() && label == 0);
         } else {
