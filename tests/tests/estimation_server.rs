@@ -19,10 +19,13 @@
 use glint_e2e::TestServer;
 use std::time::Duration;
 
+use glint_estimation::correlated_error::CorrelatedDepthError;
+use glint_estimation::pose_error_model::PoseErrorModel;
 use glint_estimation::server::{
     Estimation, SERVICE_NAME, mesh_file, refine_chunks, refine_header, view_arrays,
 };
 use glint_estimation::view::ViewMeasurement;
+use glint_estimation::view_bias::ViewPoseBias;
 use glint_eval::active::{ActiveSceneSpec, Masking, session_config, set_up};
 use glint_geometry::Part;
 use glint_geometry::image::Image;
@@ -87,9 +90,17 @@ fn remote_equals_local(target: &str, handle: tokio::runtime::Handle) -> Captured
         candidates: 6,
     })
     .unwrap();
-    let settings = session_config(&scene, ViewPolicy::Random, 3, None, 9, &Masking::default())
-        .unwrap()
-        .refine;
+    let settings = session_config(
+        &scene,
+        ViewPolicy::Random,
+        3,
+        None,
+        9,
+        &Masking::default(),
+        None,
+    )
+    .unwrap()
+    .refine;
     let captured: Vec<_> = [0, 1]
         .iter()
         .map(|&i| {
@@ -117,6 +128,60 @@ fn remote_equals_local(target: &str, handle: tokio::runtime::Handle) -> Captured
         "the small bin must still give points: {l:?}"
     );
     assert_same(&r, &l, "σ from pattern images, two views");
+
+    // Under an error model (it crosses the wire): the same pose, eq 18's information kept
+    // beside, and the model's no larger in any direction — a cell's shared depth bias only
+    // subtracts (Sherman–Morrison) and M ⪰ I makes I M⁺ I ⪯ I — and far smaller: a view adds
+    // at most about B⁻¹ (4e6 m⁻² per lateral axis here) where eq 18 claims about n/σ_z², above
+    // 1e8 m⁻² for the n > 30 points of σ_z ≲ 0.5 mm each view holds (the trace, dominated by
+    // the translation entries, at least halves).
+    let model = PoseErrorModel {
+        depth_error: CorrelatedDepthError {
+            cell_m: 2e-3,
+            bias_sigma_m: 0.5e-3,
+        },
+        view_bias: ViewPoseBias {
+            covariance_v: Matrix6::from_diagonal(&Vector6::new(
+                0.5e-3f64.powi(2),
+                0.5e-3f64.powi(2),
+                1e-3f64.powi(2),
+                0.5f64.to_radians().powi(2),
+                0.5f64.to_radians().powi(2),
+                1f64.to_radians().powi(2),
+            )),
+        },
+    };
+    let modelled = RefineSettings {
+        error_model: Some(model),
+        ..settings
+    };
+    let lm = local
+        .refine(&scene.object, &views, &t_w_o, &modelled)
+        .unwrap();
+    let rm = remote
+        .refine(&scene.object, &views, &t_w_o, &modelled)
+        .unwrap();
+    assert_same(&rm, &lm, "with an error model, two views");
+    let scale = l.information.amax();
+    assert!((rm.pixel_information - lm.pixel_information).amax() <= TOLERANCE * scale);
+    assert!(
+        (lm.pixel_information - l.information).amax() <= TOLERANCE * scale,
+        "eq 18's information does not depend on the model"
+    );
+    assert!((lm.t_w_o.translation.vector - l.t_w_o.translation.vector).norm() < TOLERANCE);
+    let lowest = (lm.pixel_information - lm.information)
+        .symmetric_eigenvalues()
+        .min();
+    assert!(
+        lowest >= -TOLERANCE * scale,
+        "the model adds information: {lowest}"
+    );
+    assert!(
+        lm.information.trace() < 0.5 * lm.pixel_information.trace(),
+        "the model claims what eq 18 claims: {} vs {}",
+        lm.information.trace(),
+        lm.pixel_information.trace()
+    );
 
     // A constant σ sends depth only.
     let constant = RefineSettings {

@@ -10,6 +10,8 @@
 //! - [`icp`]: the ICP baseline (point-to-point and point-to-plane) on the same inputs;
 //! - [`nbv`]: next-best-view planning by minimum pose entropy (eq 20–23) and the heuristics;
 //! - [`view_bias`]: a pose error one view's points share, and the multi-view information left;
+//! - [`pose_error_model`]: both shared errors as one measured model per part, in a file
+//!   (shipped for the built-in parts), as sessions' refinements and planners use it;
 //! - [`view`]: one captured view → the part's depth points under a pose hypothesis;
 //! - [`multiview`]: a session's views → one refined pose with its information (the two-pass
 //!   hypothesis-silhouette masking the in-process stage and the `Refine` RPC share).
@@ -27,6 +29,7 @@ pub mod icp;
 pub mod multiview;
 pub mod nbv;
 pub mod points;
+pub mod pose_error_model;
 pub mod refine;
 #[cfg(feature = "server")]
 pub mod server;

@@ -4,6 +4,9 @@
 //! metres, the known background plane dropped, world points (eq 6–7), one SDF refinement over
 //! all of them (eq 8–11) with its Fisher information and covariance (eq 18–19). An optional
 //! second pass re-masks at the first pass's pose with a tighter margin and refines again.
+//! With the part's [`PoseErrorModel`] the information reported is what survives the depth
+//! errors neighbouring pixels share and the pose error each view shares (the model's), not
+//! eq 18's independent pixels.
 //!
 //! Frames: `t_w_c` left camera → world, `t_w_o` object → world; the information is over the
 //! left perturbation of `t_o_w`, translation first (as [`crate::refine`]). Transport-free: the
@@ -18,7 +21,10 @@ use rayon::prelude::*;
 
 use crate::depth_alignment::{DepthAlignmentConfig, align_depth};
 use crate::depth_sigma::DepthSigmaError;
-use crate::refine::{RefineError, RefineStatus, SdfRefineConfig, refine_sdf};
+use crate::pose_error_model::PoseErrorModel;
+use crate::refine::{
+    RefineError, RefineStatus, SdfRefineConfig, covariance_from_information, refine_sdf,
+};
 use crate::view::{
     BackgroundPlane, SigmaSource, ViewError, ViewMeasurement, ViewPoints, ViewSigma,
     hypothesis_mask, points_in_mask, view_sigma,
@@ -63,6 +69,11 @@ pub struct RefineSettings {
     /// Absent from older journals: off.
     #[serde(default)]
     pub align_depth: bool,
+    /// The camera's error model on the part (measured on tuning scenes, `glint eval
+    /// refine`): the information and covariance reported are what survive its shared errors.
+    /// `None`: eq 18–19's independent pixels. Absent from older journals: none.
+    #[serde(default)]
+    pub error_model: Option<PoseErrorModel>,
 }
 
 /// What a refinement over all views so far gives.
@@ -70,12 +81,15 @@ pub struct RefineSettings {
 pub struct Refinement {
     /// The refined pose, object → world (the hypothesis when the refinement diverged).
     pub t_w_o: Isometry3<f64>,
-    /// Fisher information of the pose (eq 18; zero when diverged) and its inverse (eq 19;
-    /// `None` when singular).
+    /// Fisher information of the pose under the settings' error model (eq 18 without one;
+    /// zero when diverged), over the left perturbation of `t_o_w`.
     pub information: Matrix6<f64>,
     /// The pose covariance, `information⁻¹` (eq 19), in the same coordinates; `None` when
     /// the information is singular or the refinement diverged.
     pub covariance: Option<Matrix6<f64>>,
+    /// Eq 18's information, independent pixels (the refiner's weighting), whatever the error
+    /// model: `information` itself without one.
+    pub pixel_information: Matrix6<f64>,
     /// Depth points of the part per view, in view order.
     pub view_points: Vec<usize>,
     /// Points with whitened residual within `inlier_k` at the solution, over all views.
@@ -182,6 +196,14 @@ impl RefineSettings {
                 ));
             }
         }
+        if let Some(model) = &self.error_model {
+            model.validate().map_err(|e| match e {
+                crate::pose_error_model::PoseErrorModelError::Invalid { field, message } => {
+                    input(format!("error_model.{field}"), message)
+                }
+                other => input("error_model", other.to_string()),
+            })?;
+        }
         if let RefineSigma::Constant { sigma_z_m } = self.sigma
             && !(sigma_z_m.is_finite() && sigma_z_m > 0.0)
         {
@@ -278,7 +300,7 @@ pub fn refine_views(
     let refine = |points: &[_], t_w_o: &Isometry3<f64>| {
         refine_sdf(grid, points, &t_w_o.inverse(), config).map_err(MultiviewError::from)
     };
-    let (points, mut view_points) = points_at(t_w_o, settings.mask_margin_m)?;
+    let (mut points, mut view_points) = points_at(t_w_o, settings.mask_margin_m)?;
     // The hypothesis' own silhouette holds the part's pixels (a detector errs least across the
     // image); only then is it moved along the first view's rays onto that view's depth (the
     // detector's view; other views' rays would spread the search across its accurate axes).
@@ -298,8 +320,9 @@ pub fn refine_views(
         && result.status != RefineStatus::Diverged
     {
         let first = result.t_o_w.inverse();
-        let (points, counts) = points_at(&first, margin_m)?;
-        result = refine(&points, &first)?;
+        let (final_points, counts) = points_at(&first, margin_m)?;
+        result = refine(&final_points, &first)?;
+        points = final_points;
         view_points = counts;
     }
     let status = match result.status {
@@ -308,19 +331,40 @@ pub fn refine_views(
         RefineStatus::Diverged => "diverged",
     };
     // A diverged pose is not an estimate: keep the hypothesis, claim no information.
-    let (t_w_o_refined, information, covariance) = if result.status == RefineStatus::Diverged {
-        (*t_w_o, Matrix6::zeros(), None)
-    } else {
-        (
-            result.t_o_w.inverse(),
-            result.information,
-            result.covariance,
-        )
-    };
+    let (t_w_o_refined, information, covariance, pixel_information) =
+        if result.status == RefineStatus::Diverged {
+            (*t_w_o, Matrix6::zeros(), None, Matrix6::zeros())
+        } else if let Some(model) = &settings.error_model {
+            let mut start = 0;
+            let per_view: Vec<_> = views
+                .iter()
+                .zip(&view_points)
+                .map(|(v, &n)| {
+                    let of_view = &points[start..start + n];
+                    start += n;
+                    model.view_information(grid, of_view, &result.t_o_w, &v.t_w_c, config)
+                })
+                .collect();
+            let information = model.information(&per_view);
+            (
+                result.t_o_w.inverse(),
+                information,
+                covariance_from_information(&information),
+                result.information,
+            )
+        } else {
+            (
+                result.t_o_w.inverse(),
+                result.information,
+                result.covariance,
+                result.information,
+            )
+        };
     Ok(Refinement {
         t_w_o: t_w_o_refined,
         information,
         covariance,
+        pixel_information,
         view_points,
         inliers: result.inliers,
         iterations: result.iterations,
@@ -348,6 +392,7 @@ mod tests {
             window_radius_px: 2,
             sigma: RefineSigma::PatternImages,
             align_depth: false,
+            error_model: None,
         }
     }
 
@@ -377,5 +422,11 @@ mod tests {
         let mut s = settings();
         s.sigma = RefineSigma::Constant { sigma_z_m: 0.0 };
         assert_eq!(field(s), "constant_sigma_z_m");
+        let mut s = settings();
+        s.error_model = Some(PoseErrorModel {
+            depth_error: crate::correlated_error::CorrelatedDepthError::INDEPENDENT,
+            view_bias: crate::view_bias::ViewPoseBias::none(),
+        });
+        assert_eq!(field(s), "error_model.cell_m");
     }
 }

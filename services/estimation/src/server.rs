@@ -33,8 +33,10 @@ use nalgebra::{Isometry3, Matrix6, Unit, Vector3};
 use tokio_stream::StreamExt;
 use tonic::{Request, Response, Status, Streaming};
 
+use crate::correlated_error::CorrelatedDepthError;
 use crate::multiview::{MultiviewError, RefineSettings, RefineSigma, Refinement, refine_views};
 use crate::nbv::{NbvError, PosePrior, plan_next_view, pose_entropy_nats};
+use crate::pose_error_model::{PoseErrorModel, PoseErrorModelError};
 use crate::refine::{SdfRefineConfig, refine_grid_config};
 use crate::view::{BackgroundPlane, ViewMeasurement};
 
@@ -213,6 +215,7 @@ pub fn refine_header(
         mask_margin_m: settings.mask_margin_m,
         final_mask_margin_m: settings.final_mask_margin_m,
         align_depth: settings.align_depth,
+        error_model: settings.error_model.as_ref().map(error_model_message),
         background: settings.background.map(|b| v1::BackgroundPlane {
             normal_w: Some(v1::Vector3 {
                 x: b.normal_w.x,
@@ -223,6 +226,42 @@ pub fn refine_header(
             clearance_m: b.clearance_m,
         }),
     }
+}
+
+/// A pose error model as its message.
+pub fn error_model_message(model: &PoseErrorModel) -> v1::PoseErrorModel {
+    v1::PoseErrorModel {
+        cell_m: model.depth_error.cell_m,
+        bias_sigma_m: model.depth_error.bias_sigma_m,
+        view_bias_covariance_v: Some((&model.view_bias.covariance_v).into()),
+    }
+}
+
+/// A pose error model message as the model, validated; `field` (`error_model`) prefixes the
+/// field named in errors (`error_model.cell_m`).
+pub fn error_model_from_message(
+    m: &v1::PoseErrorModel,
+    field: &str,
+) -> Result<PoseErrorModel, ConversionError> {
+    let covariance_v = Matrix6::try_from(required(
+        &m.view_bias_covariance_v,
+        &format!("{field}.view_bias_covariance_v"),
+    )?)
+    .map_err(|e| e.within(&format!("{field}.view_bias_covariance_v")))?;
+    let model = PoseErrorModel {
+        depth_error: CorrelatedDepthError {
+            cell_m: m.cell_m,
+            bias_sigma_m: m.bias_sigma_m,
+        },
+        view_bias: crate::view_bias::ViewPoseBias { covariance_v },
+    };
+    model.validate().map_err(|e| match e {
+        PoseErrorModelError::Invalid { field: f, message } => {
+            ConversionError::new(format!("{field}.{f}"), message)
+        }
+        other => ConversionError::new(field, other.to_string()),
+    })?;
+    Ok(model)
 }
 
 /// A view's header and arrays: its depth (missing depth as NaN: infinite or negative values,
@@ -308,6 +347,7 @@ pub fn refinement_to_message(r: &Refinement, entropy_nats: f64) -> v1::RefineRes
         t_w_o: Some(v1::Pose::with_frames(&r.t_w_o, "world", "object")),
         covariance: r.covariance.as_ref().map(Into::into),
         information: Some((&r.information).into()),
+        pixel_information: Some((&r.pixel_information).into()),
         entropy_nats,
         stats: Some(v1::RefineStats {
             iterations: count(r.iterations),
@@ -332,11 +372,18 @@ pub fn refinement_from_message(m: &v1::RefineResponse) -> Result<Refinement, Con
         .as_ref()
         .map(|c| Matrix6::try_from(c).map_err(|e| e.within("covariance")))
         .transpose()?;
+    let pixel_information = m
+        .pixel_information
+        .as_ref()
+        .map(|c| Matrix6::try_from(c).map_err(|e| e.within("pixel_information")))
+        .transpose()?
+        .unwrap_or(information);
     let stats = required(&m.stats, "stats")?;
     Ok(Refinement {
         t_w_o,
         information,
         covariance,
+        pixel_information,
         view_points: stats.view_points.iter().map(|&n| n as usize).collect(),
         inliers: stats.inliers as usize,
         iterations: stats.iterations as usize,
@@ -414,6 +461,11 @@ pub fn decode_header(h: &v1::RefineHeader) -> Result<DecodedHeader, ConversionEr
         window_radius_px: h.window_radius_px,
         sigma,
         align_depth: h.align_depth,
+        error_model: h
+            .error_model
+            .as_ref()
+            .map(|m| error_model_from_message(m, "error_model"))
+            .transpose()?,
     };
     settings.validate().map_err(|e| match e {
         MultiviewError::Input { field, message } => ConversionError::new(field, message),
@@ -910,6 +962,21 @@ mod tests {
             window_radius_px: 3,
             align_depth: true,
             sigma: RefineSigma::PatternImages,
+            error_model: Some(PoseErrorModel {
+                depth_error: CorrelatedDepthError {
+                    cell_m: 2e-3,
+                    bias_sigma_m: 0.5e-3,
+                },
+                view_bias: crate::view_bias::ViewPoseBias {
+                    covariance_v: Matrix6::from_fn(|i, j| {
+                        if i == j {
+                            1e-6
+                        } else {
+                            1e-8 / (1 + i + j) as f64
+                        }
+                    }),
+                },
+            }),
         };
         let t_w_o = Isometry3::translation(0.1, -0.2, 0.5);
         let hash = "ab".repeat(32);
@@ -928,6 +995,16 @@ mod tests {
         let mut h = header.clone();
         h.sigma_source = 0;
         assert_eq!(field(h), "sigma_source");
+        let mut h = header.clone();
+        if let Some(m) = h.error_model.as_mut() {
+            m.bias_sigma_m = f64::NAN;
+        }
+        assert_eq!(field(h), "error_model.bias_sigma_m");
+        let mut h = header.clone();
+        if let Some(m) = h.error_model.as_mut() {
+            m.view_bias_covariance_v = None;
+        }
+        assert_eq!(field(h), "error_model.view_bias_covariance_v");
         let mut h = header.clone();
         h.mesh = Some(v1::MeshRef::new("ABC", LengthUnit::Metre));
         assert_eq!(field(h), "mesh.sha256_hex");

@@ -5,6 +5,8 @@
 
 use anyhow::Context;
 use glint_camera::setup::{BinSetup, BinSetupSpec};
+use glint_estimation::multiview::RefineSettings;
+use glint_estimation::pose_error_model::PoseErrorModel;
 use glint_geometry::image::Image;
 use glint_geometry::pose_deviation::{PoseDeviation, pose_deviation};
 use glint_geometry::{Part, Symmetry};
@@ -212,7 +214,8 @@ pub fn prediction_object_for(
 pub use glint_orchestrator::session::{CONST_SIGMA_Z_M, Masking};
 
 /// A session on `scene` with `policy`: from the stand-in detector's pose, σ_z from the pattern
-/// images, the part's pixels by `masking`.
+/// images, the part's pixels by `masking`, its information under `error_model` (eq 18's
+/// without one).
 pub fn session_config(
     scene: &ActiveScene,
     policy: ViewPolicy,
@@ -220,6 +223,7 @@ pub fn session_config(
     entropy_threshold_nats: Option<f64>,
     seed: u64,
     masking: &Masking,
+    error_model: Option<PoseErrorModel>,
 ) -> anyhow::Result<SessionConfig> {
     let info = scene.camera.info().map_err(anyhow::Error::msg)?;
     Ok(SessionConfig {
@@ -230,7 +234,10 @@ pub fn session_config(
         max_views,
         entropy_threshold_nats,
         seed,
-        refine: masking.refine_settings(&info, Some(&Cell::standard_bin())),
+        refine: RefineSettings {
+            error_model,
+            ..masking.refine_settings(&info, Some(&Cell::standard_bin()))
+        },
         const_sigma_z_m: CONST_SIGMA_Z_M,
     })
 }
@@ -372,7 +379,7 @@ mod tests {
     }
 
     fn config(scene: &ActiveScene, policy: ViewPolicy, max_views: usize) -> SessionConfig {
-        session_config(scene, policy, max_views, None, 9, &Masking::default()).unwrap()
+        session_config(scene, policy, max_views, None, 9, &Masking::default(), None).unwrap()
     }
 
     /// What a broken camera does from its second capture on.

@@ -11,9 +11,12 @@ use glint_orchestrator::local::{LocalEstimation, LocalPrediction};
 use glint_orchestrator::session::{self, Session, Stages, ViewPolicy};
 use glint_orchestrator::stages::PredictionStage;
 
+use glint_estimation::pose_error_model::PoseErrorModel;
+
 use crate::active::{
     ActiveSceneSpec, Calibration, Masking, deviations, prediction_object, session_config, set_up,
 };
+use crate::metrics::nees;
 
 /// What to compare.
 #[derive(Clone, Debug)]
@@ -40,6 +43,9 @@ pub struct PolicyComparison {
     pub masking: Masking,
     /// The render workers render the bin with the part (beyond the paper).
     pub predict_with_bin: bool,
+    /// The camera's error model on the part the sessions refine and plan under (`None`:
+    /// eq 18's independent pixels).
+    pub error_model: Option<PoseErrorModel>,
 }
 
 /// One step of one session.
@@ -63,6 +69,13 @@ pub struct StepRow {
     pub entropy_nats: f64,
     /// The entropy the planner predicted for this view (entropy policies, after the first).
     pub predicted_entropy_nats: Option<f64>,
+    /// NEES of the refined pose against the truth under the session's information (its
+    /// error model's), and under eq 18's independent pixels; `nees_dof` degrees of freedom.
+    pub nees: f64,
+    /// NEES under eq 18's information.
+    pub nees_pixels: f64,
+    /// Degrees of freedom of the NEES: 6, or 5 for a part with a continuous symmetry.
+    pub nees_dof: usize,
     /// Time the step spent in the prediction stage, seconds.
     pub predict_s: f64,
     /// Wall-clock time of the whole step, from the previous step's end (or the session's
@@ -108,7 +121,15 @@ pub fn run(
             _ => None,
         };
         for &policy in &spec.policies {
-            let config = session_config(&scene, policy, spec.views, None, seed, &spec.masking)?;
+            let config = session_config(
+                &scene,
+                policy,
+                spec.views,
+                None,
+                seed,
+                &spec.masking,
+                spec.error_model,
+            )?;
             let stages = Stages {
                 camera: &scene.camera,
                 estimation: &estimation,
@@ -137,23 +158,34 @@ pub fn run(
                 tracing::warn!(seed, policy = policy.name(), "session failed: {e}");
             }
             let (_, devs) = deviations(&scene, &session.steps);
+            let t_o_w_gt = scene.gt_t_w_o.inverse();
             let session_rows: Vec<StepRow> = session
                 .steps
                 .iter()
                 .zip(&devs)
                 .zip(&step_s)
-                .map(|((s, d), &secs)| StepRow {
-                    seed,
-                    policy: policy.name(),
-                    views: s.step + 1,
-                    view: s.view,
-                    points: s.total_points,
-                    err_mm: d.translation_mm(),
-                    err_deg: d.rotation_deg(),
-                    entropy_nats: s.entropy_nats,
-                    predicted_entropy_nats: s.predicted_entropy_nats,
-                    predict_s: s.times.predict_ms * 1e-3,
-                    step_s: secs,
+                .map(|((s, d), &secs)| {
+                    let t_o_w = s.t_w_o.inverse();
+                    let (nees_model, nees_dof) =
+                        nees(&t_o_w, &t_o_w_gt, &s.information, &scene.symmetry);
+                    let (nees_pixels, _) =
+                        nees(&t_o_w, &t_o_w_gt, &s.pixel_information, &scene.symmetry);
+                    StepRow {
+                        seed,
+                        policy: policy.name(),
+                        views: s.step + 1,
+                        view: s.view,
+                        points: s.total_points,
+                        err_mm: d.translation_mm(),
+                        err_deg: d.rotation_deg(),
+                        entropy_nats: s.entropy_nats,
+                        predicted_entropy_nats: s.predicted_entropy_nats,
+                        nees: nees_model,
+                        nees_pixels,
+                        nees_dof,
+                        predict_s: s.times.predict_ms * 1e-3,
+                        step_s: secs,
+                    }
                 })
                 .collect();
             on_session(&session_rows);
@@ -164,12 +196,13 @@ pub fn run(
 }
 
 /// Per policy and number of views: sessions, mean translation/rotation error, the rates
-/// within 5 mm/5° and 2 mm/2°, mean entropy and, for the entropy policies, the mean gap
-/// between the entropy predicted for the view and the one reached.
+/// within 5 mm/5° and 2 mm/2°, mean entropy, for the entropy policies the mean gap between
+/// the entropy predicted for the view and the one reached, and the mean NEES over the poses
+/// correct at 5 mm/5° (Table I's local check) under the sessions' information and eq 18's.
 pub fn summary_markdown(rows: &[StepRow], policies: &[ViewPolicy], views: usize) -> String {
     let mut out = String::from(
-        "| policy | views | sessions | mean err (mm) | mean err (°) | 5mm/5° | 2mm/2° | mean h (nats) | mean h − h_pred (nats) | mean predict (s) |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| policy | views | sessions | mean err (mm) | mean err (°) | 5mm/5° | 2mm/2° | mean h (nats) | mean h − h_pred (nats) | mean NEES (dof) | mean NEES eq 18 | mean predict (s) |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for policy in policies {
         for k in 1..=views {
@@ -182,15 +215,11 @@ pub fn summary_markdown(rows: &[StepRow], policies: &[ViewPolicy], views: usize)
             }
             let n = at.len() as f64;
             let mean = |f: &dyn Fn(&StepRow) -> f64| at.iter().map(|r| f(r)).sum::<f64>() / n;
+            let within = |r: &StepRow, t: &CorrectThreshold| {
+                r.err_mm * 1e-3 < t.translation_m && r.err_deg.to_radians() < t.rotation_rad
+            };
             let rate = |t: &CorrectThreshold| {
-                100.0
-                    * at.iter()
-                        .filter(|r| {
-                            r.err_mm * 1e-3 < t.translation_m
-                                && r.err_deg.to_radians() < t.rotation_rad
-                        })
-                        .count() as f64
-                    / n
+                100.0 * at.iter().filter(|r| within(r, t)).count() as f64 / n
             };
             let gaps: Vec<f64> = at
                 .iter()
@@ -201,9 +230,22 @@ pub fn summary_markdown(rows: &[StepRow], policies: &[ViewPolicy], views: usize)
             } else {
                 format!("{:+.2}", gaps.iter().sum::<f64>() / gaps.len() as f64)
             };
+            let correct: Vec<&&StepRow> = at
+                .iter()
+                .filter(|r| within(r, &CorrectThreshold::MM5_DEG5))
+                .collect();
+            let mean_nees = |f: &dyn Fn(&StepRow) -> f64| {
+                if correct.is_empty() {
+                    "-".to_string()
+                } else {
+                    let m = correct.iter().map(|r| f(r)).sum::<f64>() / correct.len() as f64;
+                    format!("{m:.1}")
+                }
+            };
+            let dof = correct.first().map_or(6, |r| r.nees_dof);
             let _ = writeln!(
                 out,
-                "| {} | {k} | {} | {:.2} | {:.2} | {:.0} % | {:.0} % | {:.2} | {gap} | {:.2} |",
+                "| {} | {k} | {} | {:.2} | {:.2} | {:.0} % | {:.0} % | {:.2} | {gap} | {} ({dof}) | {} | {:.2} |",
                 policy.name(),
                 at.len(),
                 mean(&|r| r.err_mm),
@@ -211,6 +253,8 @@ pub fn summary_markdown(rows: &[StepRow], policies: &[ViewPolicy], views: usize)
                 rate(&CorrectThreshold::MM5_DEG5),
                 rate(&CorrectThreshold::MM2_DEG2),
                 mean(&|r| r.entropy_nats),
+                mean_nees(&|r| r.nees),
+                mean_nees(&|r| r.nees_pixels),
                 mean(&|r| r.predict_s),
             );
         }

@@ -17,6 +17,7 @@ use glint_estimation::correlated_error::{
 use glint_estimation::depth_alignment::{DepthAlignmentConfig, align_depth};
 use glint_estimation::icp::{IcpConfig, IcpMethod, IcpModel, refine_icp};
 use glint_estimation::points::DepthPoint;
+use glint_estimation::pose_error_model::PoseErrorModel;
 use glint_estimation::refine::{
     REFINE_SDF_PADDING_MM, SdfRefineConfig, refine_grid_config, refine_sdf,
 };
@@ -475,8 +476,8 @@ fn rates(outcomes: &[&Outcome]) -> (f64, f64) {
 }
 
 /// Runs the experiment and writes `results.csv`, `trials.csv`, `paired.csv`, `worse.csv`,
-/// `notice.csv`, `nees.csv` and `table.md` to
-/// `args.out`; returns the table.
+/// `notice.csv`, `nees.csv`, `table.md` and each part's error model `pose_error/<part>.json`
+/// to `args.out`; returns the table.
 pub fn run(args: &RefineExperiment) -> anyhow::Result<String> {
     if args.views.is_empty()
         || args
@@ -1338,6 +1339,27 @@ fn write_outputs(
         timing.join(", ")
     )?;
 
+    // Each part's error model, as sessions take it (`pose_error/<part>.json`).
+    let models_dir = args.out.join("pose_error");
+    std::fs::create_dir_all(&models_dir)
+        .with_context(|| format!("creating {}", models_dir.display()))?;
+    for (object, fit) in objects.iter().zip(&tuned.view_bias) {
+        let Some(fit) = fit else { continue };
+        let model = PoseErrorModel {
+            depth_error: tuned.depth_error.best,
+            view_bias: fit.bias,
+        };
+        let measured_on = format!(
+            "glint eval refine --seed {}: the depth error on {} points of the tuning scenes' \
+             instances at their true poses; B on {} correct single-view SDF refinements of \
+             {} tuning scenes",
+            args.seed, tuned.depth_error.points, fit.samples, args.view_bias_scenes
+        );
+        let path = models_dir.join(format!("{}.json", object.name));
+        model
+            .save(&path, &object.name, &measured_on)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
     for (name, text) in [
         ("results.csv", &csv),
         ("trials.csv", &trials_csv),

@@ -182,6 +182,11 @@ pub fn session_request(msg: &v1::StartSessionRequest) -> Result<SessionRequest, 
         entropy_threshold_nats,
         seed: msg.seed,
         calibration,
+        error_model: msg
+            .error_model
+            .as_ref()
+            .map(|m| glint_estimation::server::error_model_from_message(m, "error_model"))
+            .transpose()?,
     })
 }
 

@@ -11,6 +11,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use glint_estimation::depth_sigma::NoiseModel;
+use glint_estimation::pose_error_model::PoseErrorModel;
 use glint_geometry::{Part, TriMesh};
 use nalgebra::Isometry3;
 
@@ -20,7 +21,7 @@ use crate::session::{
 };
 use crate::stages::{
     CameraStage, CapturedView, EstimationStage, PartCalibration, PredictionObject, PredictionStage,
-    SessionObject, StageError, calibrate_noise,
+    RefineSettings, SessionObject, StageError, calibrate_noise,
 };
 use crate::store::{SessionCalibration, SessionStore, StoredSession};
 
@@ -65,6 +66,9 @@ pub struct SessionRequest {
     pub seed: u64,
     /// The part's calibration; `None`: the one Glint ships for a built-in part, if any.
     pub calibration: Option<PartCalibration>,
+    /// The camera's error model on the part; `None`: the one Glint ships for a built-in part,
+    /// eq 18's independent pixels for a mesh.
+    pub error_model: Option<PoseErrorModel>,
 }
 
 /// The orchestrator: its stages, what it knows of the cell, and its sessions.
@@ -212,6 +216,7 @@ impl Orchestrator {
             }
         };
         let info = self.camera.info()?;
+        let error_model = request.error_model;
         let config = SessionConfig {
             initial_t_w_o: request.initial_t_w_o,
             candidates,
@@ -220,7 +225,10 @@ impl Orchestrator {
             max_views: request.max_views,
             entropy_threshold_nats: request.entropy_threshold_nats,
             seed: request.seed,
-            refine: self.masking.refine_settings(&info, Some(&self.cell)),
+            refine: RefineSettings {
+                error_model,
+                ..self.masking.refine_settings(&info, Some(&self.cell))
+            },
             const_sigma_z_m: CONST_SIGMA_Z_M,
         };
         crate::session::validate(&config)?;

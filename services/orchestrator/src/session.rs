@@ -125,7 +125,7 @@ impl Default for Masking {
 
 impl Masking {
     /// The refinement's settings for `camera` in `cell` (its floor dropped when it has one),
-    /// σ_z from the pattern images (eq 1–5).
+    /// σ_z from the pattern images (eq 1–5), no error model (the part's is set beside).
     pub fn refine_settings(&self, camera: &CameraInfo, cell: Option<&Cell>) -> RefineSettings {
         RefineSettings {
             mask_margin_m: self.margin_m,
@@ -140,6 +140,7 @@ impl Masking {
             window_radius_px: camera.window_radius_px,
             sigma: RefineSigma::PatternImages,
             align_depth: self.align_depth,
+            error_model: None,
         }
     }
 }
@@ -255,6 +256,14 @@ pub fn validate(config: &SessionConfig) -> Result<(), StageError> {
             "the plane's offset and clearance must be finite, the clearance ≥ 0",
         ));
     }
+    if let Some(model) = &config.refine.error_model {
+        model.validate().map_err(|e| match e {
+            glint_estimation::pose_error_model::PoseErrorModelError::Invalid { field, message } => {
+                StageError::invalid(format!("refine.error_model.{field}"), message)
+            }
+            other => StageError::invalid("refine.error_model", other.to_string()),
+        })?;
+    }
     if !(config.const_sigma_z_m.is_finite() && config.const_sigma_z_m > 0.0) {
         return Err(StageError::invalid(
             "const_sigma_z_m",
@@ -330,9 +339,14 @@ pub struct StepRecord {
     pub total_points: usize,
     /// The refined pose, object → world.
     pub t_w_o: Isometry3<f64>,
-    /// Fisher information of the pose over all views so far (eq 18), without the planner's
-    /// prior; zero when the refinement diverged.
+    /// Fisher information of the pose over all views so far, under the refinement's error
+    /// model (eq 18 without one), without the planner's prior; zero when the refinement
+    /// diverged.
     pub information: Matrix6<f64>,
+    /// Eq 18's information of independent pixels, whatever the error model (`information`
+    /// itself without one). Absent from older journals: zeros.
+    #[serde(default = "Matrix6::zeros")]
+    pub pixel_information: Matrix6<f64>,
     /// The pose covariance, `information⁻¹` (eq 18); `None` when singular or diverged.
     pub covariance: Option<Matrix6<f64>>,
     /// Pose entropy after this step (planner's prior included), nats.
@@ -570,6 +584,7 @@ fn run_steps(
             total_points: refinement.view_points.iter().sum(),
             t_w_o: refinement.t_w_o,
             information: refinement.information,
+            pixel_information: refinement.pixel_information,
             covariance: refinement.covariance,
             entropy_nats,
             predicted_entropy_nats,
@@ -666,9 +681,19 @@ fn choose_next_view(
             missing.0
         )));
     }
+    // Under the part's error model a candidate adds what its own pose estimate would know,
+    // capped by the per-view bias (taken views get zeros and are excluded anyway).
+    let t_o_w = t_w_o.inverse();
     let informations: Vec<Matrix6<f64>> = informations
         .into_iter()
-        .map(|f| f.unwrap_or_else(Matrix6::zeros))
+        .zip(&config.candidates)
+        .map(|(f, t_w_c)| match (f, &config.refine.error_model) {
+            (Some(f), Some(model)) => {
+                let r_o_c = (t_o_w * t_w_c).rotation.to_rotation_matrix();
+                model.predicted_view_information(&f, &r_o_c)
+            }
+            (f, _) => f.unwrap_or_else(Matrix6::zeros),
+        })
         .collect();
     let started = Instant::now();
     let plan = stages.estimation.plan(collected, &informations, taken)?;

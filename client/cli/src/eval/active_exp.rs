@@ -51,6 +51,11 @@ pub struct ActiveArgs {
     /// The margin around the first pass's refined silhouette of the second pass, mm.
     #[arg(long, default_value_t = 3.0, value_parser = parse_margin_mm)]
     pub final_mask_margin_mm: f64,
+    /// The camera's error model on the part the sessions refine and plan under: a file
+    /// `glint eval refine` wrote (`DIR/pose_error/<part>.json`), or `none` for eq 18's
+    /// independent pixels.
+    #[arg(long, default_value = "none")]
+    pub error_model: String,
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -81,6 +86,15 @@ pub fn run_cmd(args: &ActiveArgs) -> anyhow::Result<()> {
             ..Masking::default()
         },
         predict_with_bin: args.predict_bin,
+        error_model: match args.error_model.as_str() {
+            "none" => None,
+            path => Some(
+                glint_estimation::pose_error_model::PoseErrorModel::load(std::path::Path::new(
+                    path,
+                ))
+                .context("--error-model")?,
+            ),
+        },
     };
     println!(
         "Fig. 9 on mock data: {} bins of the {} × {} policies, {} views each, {} candidates, \
@@ -119,12 +133,12 @@ pub fn run_cmd(args: &ActiveArgs) -> anyhow::Result<()> {
     println!("{:.0} s in all.", started.elapsed().as_secs_f64());
 
     let mut csv = String::from(
-        "seed,policy,views,view,points,err_mm,err_deg,entropy_nats,predicted_entropy_nats,predict_s,step_s\n",
+        "seed,policy,views,view,points,err_mm,err_deg,entropy_nats,predicted_entropy_nats,nees,nees_pixels,nees_dof,predict_s,step_s\n",
     );
     for r in &rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{:.4},{:.4},{:.4},{},{:.3},{:.3}",
+            "{},{},{},{},{},{:.4},{:.4},{:.4},{},{:.4},{:.4},{},{:.3},{:.3}",
             r.seed,
             r.policy,
             r.views,
@@ -135,6 +149,9 @@ pub fn run_cmd(args: &ActiveArgs) -> anyhow::Result<()> {
             r.entropy_nats,
             r.predicted_entropy_nats
                 .map_or(String::new(), |h| format!("{h:.4}")),
+            r.nees,
+            r.nees_pixels,
+            r.nees_dof,
             r.predict_s,
             r.step_s
         );

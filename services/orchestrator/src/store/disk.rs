@@ -447,6 +447,16 @@ mod tests {
                 window_radius_px: 1,
                 sigma: RefineSigma::PatternImages,
                 align_depth: true,
+                // A journal keeps the error model (B as rows, not nalgebra's columns).
+                error_model: Some(glint_estimation::pose_error_model::PoseErrorModel {
+                    depth_error: glint_estimation::correlated_error::CorrelatedDepthError {
+                        cell_m: 2e-3,
+                        bias_sigma_m: 0.5e-3,
+                    },
+                    view_bias: glint_estimation::view_bias::ViewPoseBias {
+                        covariance_v: Matrix6::from_fn(|i, j| if i == j { 1e-6 } else { 2e-8 }),
+                    },
+                }),
             },
             const_sigma_z_m: 5e-4,
         };
@@ -467,6 +477,7 @@ mod tests {
             total_points: 200 + n,
             t_w_o: Isometry3::new(Vector3::new(0.0, 1e-3, 0.02), Vector3::new(0.0, 0.1, 0.0)),
             information: Matrix6::identity() * 1e6,
+            pixel_information: Matrix6::identity() * 4e6,
             covariance: Some(Matrix6::identity() * 1e-6),
             entropy_nats: -41.25,
             predicted_entropy_nats: None,
