@@ -77,7 +77,7 @@ pub struct DemoArgs {
     pub instances: u32,
     /// Stop once the pose is this certain: the entropy of a pose with this standard deviation
     /// in every translation axis (mm) and the same number in every rotation axis (degrees).
-    #[arg(long, default_value_t = 0.03)]
+    #[arg(long, default_value_t = 0.4)]
     pub stop_sigma_mm_deg: f64,
     /// Seed of the bin, the detector's error, the captures and the predictions.
     #[arg(long, default_value_t = 1)]

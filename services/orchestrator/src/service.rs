@@ -216,7 +216,15 @@ impl Orchestrator {
             }
         };
         let info = self.camera.info()?;
-        let error_model = request.error_model;
+        let error_model = match request.error_model {
+            Some(m) => Some(m),
+            None => Part::ALL
+                .into_iter()
+                .find(|p| p.name() == object.name)
+                .map(PoseErrorModel::shipped)
+                .transpose()
+                .map_err(|e| StageError::Internal(format!("the shipped error model: {e}")))?,
+        };
         let config = SessionConfig {
             initial_t_w_o: request.initial_t_w_o,
             candidates,

@@ -51,10 +51,10 @@ pub struct ActiveArgs {
     /// The margin around the first pass's refined silhouette of the second pass, mm.
     #[arg(long, default_value_t = 3.0, value_parser = parse_margin_mm)]
     pub final_mask_margin_mm: f64,
-    /// The camera's error model on the part the sessions refine and plan under: a file
-    /// `glint eval refine` wrote (`DIR/pose_error/<part>.json`), or `none` for eq 18's
-    /// independent pixels.
-    #[arg(long, default_value = "none")]
+    /// The camera's error model on the part the sessions refine and plan under: `shipped`
+    /// (assets/calibration/<part>/pose_error.json), a file `glint eval refine` wrote
+    /// (`DIR/pose_error/<part>.json`), or `none` for eq 18's independent pixels.
+    #[arg(long, default_value = "shipped")]
     pub error_model: String,
     #[arg(long)]
     pub out: PathBuf,
@@ -88,6 +88,10 @@ pub fn run_cmd(args: &ActiveArgs) -> anyhow::Result<()> {
         predict_with_bin: args.predict_bin,
         error_model: match args.error_model.as_str() {
             "none" => None,
+            "shipped" => Some(
+                glint_estimation::pose_error_model::PoseErrorModel::shipped(args.part)
+                    .context("--error-model shipped")?,
+            ),
             path => Some(
                 glint_estimation::pose_error_model::PoseErrorModel::load(std::path::Path::new(
                     path,
