@@ -197,12 +197,9 @@ impl RefineSettings {
             }
         }
         if let Some(model) = &self.error_model {
-            model.validate().map_err(|e| match e {
-                crate::pose_error_model::PoseErrorModelError::Invalid { field, message } => {
-                    input(format!("error_model.{field}"), message)
-                }
-                other => input("error_model", other.to_string()),
-            })?;
+            model
+                .validate()
+                .map_err(|e| input(format!("error_model.{}", e.field), e.message))?;
         }
         if let RefineSigma::Constant { sigma_z_m } = self.sigma
             && !(sigma_z_m.is_finite() && sigma_z_m > 0.0)

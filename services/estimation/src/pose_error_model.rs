@@ -63,21 +63,26 @@ pub enum PoseErrorModelError {
         /// What the parser said.
         message: String,
     },
-    /// A value is out of range: fix `field` (`cell_m`, `view_bias_covariance_v`).
-    #[error("{field}: {message}")]
-    Invalid {
-        /// The offending field.
-        field: &'static str,
-        /// What is wrong with it.
-        message: String,
-    },
+    /// A value is out of range.
+    #[error(transparent)]
+    Invalid(#[from] InvalidModel),
     /// The file could not be written.
     #[error(transparent)]
     Write(#[from] AtomicWriteError),
 }
 
-fn invalid(field: &'static str, message: impl Into<String>) -> PoseErrorModelError {
-    PoseErrorModelError::Invalid {
+/// A model value out of range: fix `field` (`cell_m`, `view_bias_covariance_v`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field}: {message}")]
+pub struct InvalidModel {
+    /// The offending field.
+    pub field: &'static str,
+    /// What is wrong with it.
+    pub message: String,
+}
+
+fn invalid(field: &'static str, message: impl Into<String>) -> InvalidModel {
+    InvalidModel {
         field,
         message: message.into(),
     }
@@ -86,7 +91,7 @@ fn invalid(field: &'static str, message: impl Into<String>) -> PoseErrorModelErr
 impl PoseErrorModel {
     /// Checks every value; the error names the field (`cell_m`, `bias_sigma_m`,
     /// `view_bias_covariance_v`).
-    pub fn validate(&self) -> Result<(), PoseErrorModelError> {
+    pub fn validate(&self) -> Result<(), InvalidModel> {
         let cell = self.depth_error.cell_m;
         if !(cell.is_finite() && cell > 0.0 && cell <= MAX_CELL_M) {
             return Err(invalid(
@@ -342,7 +347,7 @@ mod tests {
     fn bad_files_and_values_name_what_is_wrong() {
         let origin = Path::new("x.json");
         let field = |text: &str| match PoseErrorModel::parse(text, origin) {
-            Err(PoseErrorModelError::Invalid { field, .. }) => field,
+            Err(PoseErrorModelError::Invalid(e)) => e.field,
             other => panic!("{other:?}"),
         };
         let good = {

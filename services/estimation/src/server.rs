@@ -36,7 +36,7 @@ use tonic::{Request, Response, Status, Streaming};
 use crate::correlated_error::CorrelatedDepthError;
 use crate::multiview::{MultiviewError, RefineSettings, RefineSigma, Refinement, refine_views};
 use crate::nbv::{NbvError, PosePrior, plan_next_view, pose_entropy_nats};
-use crate::pose_error_model::{PoseErrorModel, PoseErrorModelError};
+use crate::pose_error_model::PoseErrorModel;
 use crate::refine::{SdfRefineConfig, refine_grid_config};
 use crate::view::{BackgroundPlane, ViewMeasurement};
 
@@ -255,12 +255,9 @@ pub fn error_model_from_message(
         },
         view_bias: crate::view_bias::ViewPoseBias { covariance_v },
     };
-    model.validate().map_err(|e| match e {
-        PoseErrorModelError::Invalid { field: f, message } => {
-            ConversionError::new(format!("{field}.{f}"), message)
-        }
-        other => ConversionError::new(field, other.to_string()),
-    })?;
+    model
+        .validate()
+        .map_err(|e| ConversionError::new(format!("{field}.{}", e.field), e.message))?;
     Ok(model)
 }
 

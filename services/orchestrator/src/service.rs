@@ -198,6 +198,11 @@ impl Orchestrator {
 
     /// Creates a session (it does not run yet) and returns its id.
     pub fn start(&self, request: SessionRequest) -> Result<String, StageError> {
+        // The shipped error model goes with a built-in part, not with a mesh of its name.
+        let builtin = match &request.part {
+            PartSource::Builtin(part) => Some(*part),
+            PartSource::Mesh { .. } => None,
+        };
         let (name, mesh) = match request.part {
             PartSource::Builtin(part) => (part.name().to_owned(), part.mesh()),
             PartSource::Mesh { name, mesh } => (name, mesh),
@@ -218,9 +223,7 @@ impl Orchestrator {
         let info = self.camera.info()?;
         let error_model = match request.error_model {
             Some(m) => Some(m),
-            None => Part::ALL
-                .into_iter()
-                .find(|p| p.name() == object.name)
+            None => builtin
                 .map(PoseErrorModel::shipped)
                 .transpose()
                 .map_err(|e| StageError::Internal(format!("the shipped error model: {e}")))?,

@@ -257,11 +257,8 @@ pub fn validate(config: &SessionConfig) -> Result<(), StageError> {
         ));
     }
     if let Some(model) = &config.refine.error_model {
-        model.validate().map_err(|e| match e {
-            glint_estimation::pose_error_model::PoseErrorModelError::Invalid { field, message } => {
-                StageError::invalid(format!("refine.error_model.{field}"), message)
-            }
-            other => StageError::invalid("refine.error_model", other.to_string()),
+        model.validate().map_err(|e| {
+            StageError::invalid(format!("refine.error_model.{}", e.field), e.message)
         })?;
     }
     if !(config.const_sigma_z_m.is_finite() && config.const_sigma_z_m > 0.0) {
