@@ -323,7 +323,7 @@ fn eval_nbv_writes_rates_that_follow_from_its_trials() {
     let o = glint(argv(
         "eval nbv --parts zigzag --scenes 1 --detection-views 1 \
         --candidates 5 --max-views 2 --instances 3 --resolution 320x256 \
-        --spp 1 --random-draws 2 --min-visib-fract 0.5 --out {}",
+        --spp 1 --random-draws 2 --min-visib-fract 0.5 --nbv-error-model shipped --out {}",
         &[out.to_str().unwrap()],
     ));
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
@@ -360,11 +360,54 @@ fn eval_nbv_writes_rates_that_follow_from_its_trials() {
         );
         runs.entry(key).or_default().push(r[col("view")].clone());
     }
-    assert_eq!(runs.len(), trials_n * 5, "4 policies, Random twice");
+    assert_eq!(
+        runs.len(),
+        trials_n * 6,
+        "4 policies, Random twice, NBV under the error model"
+    );
     for (key, views) in &runs {
         assert_eq!(views.len(), 2, "{key:?}");
         assert_ne!(views[0], views[1], "{key:?}");
     }
+    // Where NBV under the error model took NBV's views it holds NBV's pose, and the
+    // information that survives the model is at most eq 18's (the sandwich I M⁺ I ⪯ I, the
+    // per-view bias only adds covariance): its entropy is higher.
+    let step = |policy: &str, instance: &str, views: &str| {
+        rows.iter()
+            .find(|r| {
+                r[col("policy")] == policy
+                    && r[col("instance")] == instance
+                    && r[col("views")] == views
+            })
+            .unwrap()
+    };
+    let mut same = 0;
+    for r in rows
+        .iter()
+        .filter(|r| r[col("policy")] == "nbv_error_model")
+    {
+        assert!(!r[col("predicted_entropy_nats")].is_empty(), "{r:?}");
+        let instance = &r[col("instance")];
+        let views = &r[col("views")];
+        let taken = |p: &str| runs[&(instance.clone(), p.to_string(), "0".to_string())].clone();
+        let n: usize = views.parse().unwrap();
+        if taken("nbv")[..n] != taken("nbv_error_model")[..n] {
+            continue;
+        }
+        same += 1;
+        let nbv = step("nbv", instance, views);
+        for c in ["err_mm", "err_deg"] {
+            assert_eq!(r[col(c)], nbv[col(c)], "{c}: {r:?}");
+        }
+        let h = |r: &Vec<String>| r[col("entropy_nats")].parse::<f64>().unwrap();
+        if r[col("status")].starts_with("error") {
+            // Not refined this step: each keeps what it had, the prior's alone if nothing.
+            assert!(h(r) >= h(nbv), "{r:?} against {nbv:?}");
+        } else {
+            assert!(h(r) > h(nbv), "{r:?} against {nbv:?}");
+        }
+    }
+    assert!(same >= 1, "no step where the two NBVs agree: {trials}");
     // results.csv's rates are the trials' own: Random's the mean of its draws.
     let results = std::fs::read_to_string(out.join("results.csv")).unwrap();
     assert!(results.starts_with("part,policy,views,n,rate_5mm5deg,rate_2mm2deg\n"));

@@ -333,16 +333,12 @@ pub fn refine_views(
             (*t_w_o, Matrix6::zeros(), None, Matrix6::zeros())
         } else if let Some(model) = &settings.error_model {
             let mut start = 0;
-            let per_view: Vec<_> = views
-                .iter()
-                .zip(&view_points)
-                .map(|(v, &n)| {
-                    let of_view = &points[start..start + n];
-                    start += n;
-                    model.view_information(grid, of_view, &result.t_o_w, &v.t_w_c, config)
-                })
-                .collect();
-            let information = model.information(&per_view);
+            let per_view = views.iter().zip(&view_points).map(|(v, &n)| {
+                let of_view = &points[start..start + n];
+                start += n;
+                (of_view, v.t_w_c)
+            });
+            let information = model.refined_information(grid, per_view, &result.t_o_w, config);
             (
                 result.t_o_w.inverse(),
                 information,

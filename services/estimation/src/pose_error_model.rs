@@ -152,6 +152,23 @@ impl PoseErrorModel {
         self.view_bias.information(views)
     }
 
+    /// The information of a pose `t_o_w` refined on `views` (each view's points and its left
+    /// camera → world) under both errors: [`Self::view_information`] per view, then
+    /// [`Self::information`].
+    pub fn refined_information<'a>(
+        &self,
+        sdf: &SdfGrid,
+        views: impl IntoIterator<Item = (&'a [DepthPoint], Isometry3<f64>)>,
+        t_o_w: &Isometry3<f64>,
+        config: &SdfRefineConfig,
+    ) -> Matrix6<f64> {
+        let per_view: Vec<ViewInformation> = views
+            .into_iter()
+            .map(|(points, t_w_c)| self.view_information(sdf, points, t_o_w, &t_w_c, config))
+            .collect();
+        self.information(&per_view)
+    }
+
     /// A predicted view's information `information` (eq 21–22, independent pixels) from a
     /// camera whose axes are `r_o_c` in the object frame, as the planner adds it: capped by
     /// the per-view bias (`(I⁻¹ + B_v)⁻¹`, the view's own pose estimate's information).
@@ -164,6 +181,18 @@ impl PoseErrorModel {
             information: *information,
             r_o_c: *r_o_c,
         }])
+    }
+
+    /// [`Self::predicted_view_information`] of a candidate whose left camera → world is
+    /// `t_w_c`, for a part believed at `t_w_o`.
+    pub fn predicted_candidate_information(
+        &self,
+        information: &Matrix6<f64>,
+        t_w_o: &Isometry3<f64>,
+        t_w_c: &Isometry3<f64>,
+    ) -> Matrix6<f64> {
+        let r_o_c = (t_w_o.inverse() * t_w_c).rotation.to_rotation_matrix();
+        self.predicted_view_information(information, &r_o_c)
     }
 
     /// The model Glint ships for `part`: `assets/calibration/<part>/pose_error.json`, as

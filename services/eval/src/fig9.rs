@@ -8,7 +8,12 @@
 //!   constant-σ baseline uses visibility and Jacobians only) from the current estimate, with
 //!   the part's *fitted* material and *calibrated* response — never the simulator's;
 //! - **Random** uniformly among the open candidates, averaged over several draws;
-//! - **Max-Distance** the candidate furthest from the detection view and every view taken.
+//! - **Max-Distance** the candidate furthest from the detection view and every view taken;
+//! - beyond the paper, **NBV under the error model** (`nbv_error_model`): NBV as a session
+//!   under the part's measured error model plans — each candidate capped by its view bias,
+//!   added to the information that survives the correlated depth error and the bias of the
+//!   views taken. It refines as NBV does (the pose does not depend on the model) and shares
+//!   NBV's predictions while their views agree.
 //!
 //! The loop is the paper's: capture the chosen view, refine on all views so far (from the
 //! previous estimate; the first from the hypothesis moved along the detection view's ray onto
@@ -33,6 +38,7 @@ use glint_estimation::nbv::{
     PosePrior, max_distance_view, plan_next_view, pose_entropy_nats, random_view,
 };
 use glint_estimation::points::DepthPoint;
+use glint_estimation::pose_error_model::PoseErrorModel;
 use glint_estimation::refine::{RefineStatus, SdfRefineConfig, refine_grid_config, refine_sdf};
 use glint_estimation::view::{SigmaSource, points_in_mask, view_sigma};
 use glint_geometry::Part;
@@ -85,8 +91,26 @@ pub struct NbvExperiment {
     pub min_visib_fract: f64,
     /// The render workers render the bin with the part (beyond the paper).
     pub predict_with_bin: bool,
+    /// Beyond the paper: each part's measured error model, in `objects`' order, to run NBV
+    /// under it as well (column [`NBV_ERROR_MODEL`]); empty: not run.
+    pub error_models: Vec<PoseErrorModel>,
     /// Output directory.
     pub out: PathBuf,
+}
+
+/// The column of NBV planned under the part's error model.
+pub const NBV_ERROR_MODEL: &str = "nbv_error_model";
+
+impl NbvExperiment {
+    /// The policies' columns in the output files, NBV under the error model last.
+    pub fn columns(&self) -> Vec<&'static str> {
+        let mut columns: Vec<&'static str> =
+            self.policies.iter().map(|p| policy_column(*p)).collect();
+        if !self.error_models.is_empty() {
+            columns.push(NBV_ERROR_MODEL);
+        }
+        columns
+    }
 }
 
 /// The policy's name in the output files (`nbv`, `nbv_const_sigma`, `random`, `max_distance`).
@@ -119,6 +143,8 @@ struct Trial {
 struct Run {
     trial: usize,
     policy: ViewPolicy,
+    /// NBV planning under the part's error model ([`NBV_ERROR_MODEL`]).
+    under_model: bool,
     /// Which draw of the Random policy (0 for the others).
     draw: u32,
     views: Vec<usize>,
@@ -128,6 +154,35 @@ struct Run {
     predicted_entropy_nats: Option<f64>,
     predict_ms: f64,
 }
+
+impl Run {
+    fn column(&self) -> &'static str {
+        if self.under_model {
+            NBV_ERROR_MODEL
+        } else {
+            policy_column(self.policy)
+        }
+    }
+
+    /// What its next decision needs predicted, if anything: its trial, views so far (its
+    /// estimate follows from them) and σ source. Runs with the same key read one prediction:
+    /// NBV and NBV under the error model while their views agree (their estimates then agree
+    /// to rounding; the request's seed is the same, draw 0).
+    fn prediction_key(&self) -> Option<(usize, Vec<usize>, &'static str)> {
+        self.policy
+            .prediction(CONST_SIGMA_Z_M)
+            .map(|_| (self.trial, self.views.clone(), policy_column(self.policy)))
+    }
+}
+
+/// A run's seed for its decisions and predictions.
+fn run_seed(seed: u64, run: &Run, trial: &Trial) -> u64 {
+    seed ^ (trial_key(trial) << 8) ^ u64::from(run.draw).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
+/// One run's view of its predicted candidates: each candidate's information (zeros where
+/// taken) and the time the prediction took.
+type Predicted = (Vec<Matrix6<f64>>, f64);
 
 /// One step of one run: the pose after `views` views.
 #[derive(Clone, Debug, PartialEq)]
@@ -216,31 +271,18 @@ fn detection_views(count: u32, candidates: usize) -> Vec<usize> {
     (0..count).map(|i| i * candidates / count).collect()
 }
 
-/// The decision of one run: its next view, the entropy predicted for it and the time spent
-/// predicting.
-fn choose(
+/// The prediction an entropy policy's run reads: every open candidate from its estimate.
+fn predict(
     run: &Run,
     trial: &Trial,
     candidates: &[Isometry3<f64>],
     prediction: &(LocalPrediction, PredictionObject),
-    prior: &PosePrior,
     seed: u64,
-) -> anyhow::Result<(usize, Option<f64>, f64)> {
-    let step = run.views.len();
-    let run_seed =
-        seed ^ (trial_key(trial) << 8) ^ u64::from(run.draw).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    let Some(sigma) = run.policy.prediction(CONST_SIGMA_Z_M) else {
-        let view = match run.policy {
-            ViewPolicy::Random => random_view(candidates.len(), &run.views, run_seed, step)?,
-            _ => {
-                // Furthest from the detection view and every view taken.
-                let mut from = run.views.clone();
-                from.push(trial.detection_view);
-                max_distance_view(candidates, &from)?
-            }
-        };
-        return Ok((view, None, 0.0));
-    };
+) -> anyhow::Result<Predicted> {
+    let sigma = run
+        .policy
+        .prediction(CONST_SIGMA_Z_M)
+        .context("a policy without a prediction")?;
     let (workers, object) = prediction;
     let request = PredictionRequest {
         t_w_o: run.t_w_o,
@@ -251,7 +293,7 @@ fn choose(
             .map(|(i, t)| (i as u32, *t))
             .collect(),
         sigma,
-        seed: run_seed,
+        seed: run_seed(seed, run, trial),
         with_maps: false,
     };
     let started = Instant::now();
@@ -265,9 +307,55 @@ fn choose(
             *slot = p.information;
         }
     }
-    let plan = plan_next_view(&run.information, &informations, &run.views, prior)?;
+    Ok((informations, predict_ms))
+}
+
+/// The decision of one run: its next view, the entropy predicted for it and the time spent
+/// predicting. Entropy policies read `predicted` (their [`Run::prediction_key`]'s); under
+/// `model` each candidate is capped by its view bias, as a session under the model plans.
+fn choose(
+    run: &Run,
+    trial: &Trial,
+    candidates: &[Isometry3<f64>],
+    predicted: Option<&Predicted>,
+    model: Option<&PoseErrorModel>,
+    prior: &PosePrior,
+    seed: u64,
+) -> anyhow::Result<(usize, Option<f64>, f64)> {
+    let step = run.views.len();
+    let Some((informations, predict_ms)) = predicted else {
+        let view = match run.policy {
+            ViewPolicy::Random => random_view(
+                candidates.len(),
+                &run.views,
+                run_seed(seed, run, trial),
+                step,
+            )?,
+            ViewPolicy::MaxDistance => {
+                // Furthest from the detection view and every view taken.
+                let mut from = run.views.clone();
+                from.push(trial.detection_view);
+                max_distance_view(candidates, &from)?
+            }
+            other => anyhow::bail!("{} reads a prediction", policy_column(other)),
+        };
+        return Ok((view, None, 0.0));
+    };
+    let capped: Vec<Matrix6<f64>>;
+    let informations = match (model, run.under_model) {
+        (Some(model), true) => {
+            capped = informations
+                .iter()
+                .zip(candidates)
+                .map(|(f, t_w_c)| model.predicted_candidate_information(f, &run.t_w_o, t_w_c))
+                .collect();
+            &capped
+        }
+        _ => informations,
+    };
+    let plan = plan_next_view(&run.information, informations, &run.views, prior)?;
     let h = plan.entropies_nats.get(plan.chosen).copied().flatten();
-    Ok((plan.chosen, h, predict_ms))
+    Ok((plan.chosen, h, *predict_ms))
 }
 
 /// A number naming a part by its name, so that a trial's seeds do not depend on which other
@@ -294,10 +382,14 @@ fn trial_key(trial: &Trial) -> u64 {
 /// The refinement after a run's newest view: all its views' points of the trial's instance,
 /// from the previous estimate (the first from the hypothesis aligned along the first view's
 /// rays onto its depth). Returns the status; a run whose views hold no points keeps its pose.
+/// A run under the error model keeps the information under `model` (the views' cameras from
+/// `candidates`), any other eq 18's.
 fn refine_run(
     run: &mut Run,
     trial: &Trial,
     captures: &HashMap<usize, ViewCapture>,
+    candidates: &[Isometry3<f64>],
+    model: Option<&PoseErrorModel>,
     grid: &SdfGrid,
     config: &SdfRefineConfig,
 ) -> String {
@@ -331,7 +423,15 @@ fn refine_run(
     match refine_sdf(grid, &points, &t_o_w, config) {
         Ok(r) if r.status != RefineStatus::Diverged => {
             run.t_w_o = r.t_o_w.inverse();
-            run.information = r.information;
+            run.information = match (model, run.under_model) {
+                (Some(model), true) => model.refined_information(
+                    grid,
+                    run.views.iter().map(|v| (of(v), candidates[*v])),
+                    &r.t_o_w,
+                    config,
+                ),
+                _ => r.information,
+            };
             format!("{:?}", r.status).to_lowercase()
         }
         Ok(_) => "diverged".into(),
@@ -355,6 +455,22 @@ pub fn run(
         spec.candidates
     );
     anyhow::ensure!(spec.random_draws >= 1, "random_draws: at least one");
+    anyhow::ensure!(
+        spec.error_models.is_empty() || spec.error_models.len() == spec.objects.len(),
+        "error_models: one per part ({} parts, {} models)",
+        spec.objects.len(),
+        spec.error_models.len()
+    );
+    for (model, part) in spec.error_models.iter().zip(&spec.objects) {
+        model.validate().map_err(|e| {
+            anyhow::anyhow!(
+                "error_models ({}): {}: {}",
+                part.object.name,
+                e.field,
+                e.message
+            )
+        })?;
+    }
     spec.camera
         .rig_and_config()
         .context("the camera's settings")?;
@@ -362,8 +478,9 @@ pub fn run(
     let prior = PosePrior::default();
     let noise = InitialPoseNoise::default();
     let mut rows = Vec::new();
-    for part in &spec.objects {
+    for (part_index, part) in spec.objects.iter().enumerate() {
         let object = &part.object;
+        let model = spec.error_models.get(part_index);
         let grid = SdfGrid::build(&object.mesh, &refine_grid_config())
             .with_context(|| format!("SDF of {}", object.name))?;
         let session_object = object.session_object();
@@ -416,7 +533,9 @@ pub fn run(
             }
             let mut runs: Vec<Run> = Vec::new();
             for (t, trial) in trials.iter().enumerate() {
-                for &policy in &spec.policies {
+                let under_model = model.map(|_| (ViewPolicy::Nbv, true));
+                let plans = spec.policies.iter().map(|p| (*p, false)).chain(under_model);
+                for (policy, under_model) in plans {
                     let draws = if policy == ViewPolicy::Random {
                         spec.random_draws
                     } else {
@@ -426,6 +545,7 @@ pub fn run(
                         runs.push(Run {
                             trial: t,
                             policy,
+                            under_model,
                             draw,
                             views: Vec::new(),
                             t_w_o: trial.initial_t_w_o,
@@ -438,15 +558,38 @@ pub fn run(
             }
             let mut captures: HashMap<usize, ViewCapture> = HashMap::new();
             for _step in 0..spec.max_views {
-                // 1. Every run chooses its next view (the renders are parallel inside too).
+                // 1. The predictions the entropy policies read, once per key (the renders are
+                //    parallel inside too); then every run chooses its next view.
+                let mut keys: HashMap<(usize, Vec<usize>, &'static str), usize> = HashMap::new();
+                let mut first_of_key = Vec::new();
+                for (i, r) in runs.iter().enumerate() {
+                    if let Some(key) = r.prediction_key() {
+                        keys.entry(key).or_insert_with(|| {
+                            first_of_key.push(i);
+                            first_of_key.len() - 1
+                        });
+                    }
+                }
+                let predicted: Vec<Predicted> = first_of_key
+                    .par_iter()
+                    .map(|&i| {
+                        let r = &runs[i];
+                        predict(r, &trials[r.trial], &candidates, &prediction, spec.seed)
+                    })
+                    .collect::<anyhow::Result<_>>()?;
                 let choices: Vec<(usize, Option<f64>, f64)> = runs
                     .par_iter()
                     .map(|r| {
+                        let read = r
+                            .prediction_key()
+                            .and_then(|k| keys.get(&k))
+                            .map(|&k| &predicted[k]);
                         choose(
                             r,
                             &trials[r.trial],
                             &candidates,
-                            &prediction,
+                            read,
+                            model,
                             &prior,
                             spec.seed,
                         )
@@ -474,7 +617,15 @@ pub fn run(
                         r.views.push(view);
                         r.predicted_entropy_nats = h;
                         r.predict_ms = ms;
-                        refine_run(r, &trials[r.trial], &captures, &grid, &refine_config)
+                        refine_run(
+                            r,
+                            &trials[r.trial],
+                            &captures,
+                            &candidates,
+                            model,
+                            &grid,
+                            &refine_config,
+                        )
                     })
                     .collect();
                 for (r, status) in runs.iter().zip(statuses) {
@@ -489,7 +640,7 @@ pub fn run(
                         scene: s,
                         detection_view: trial.detection_view,
                         instance: trial.instance,
-                        policy: policy_column(r.policy),
+                        policy: r.column(),
                         draw: r.draw,
                         views: r.views.len(),
                         view,
@@ -559,15 +710,14 @@ fn successes(
 }
 
 /// The rates per part (and `all`), policy and view count.
-pub fn rates(rows: &[StepRow], policies: &[ViewPolicy], max_views: usize) -> Vec<RateRow> {
+pub fn rates(rows: &[StepRow], columns: &[&'static str], max_views: usize) -> Vec<RateRow> {
     let five = successes(rows, &CorrectThreshold::MM5_DEG5);
     let two = successes(rows, &CorrectThreshold::MM2_DEG2);
     let mut parts = names_in_order(rows.iter().map(|r| r.part.as_str()));
     parts.push("all");
     let mut out = Vec::new();
     for part in &parts {
-        for &policy in policies {
-            let name = policy_column(policy);
+        for &name in columns {
             for views in 1..=max_views {
                 let keep = |k: &(&'static str, TrialKey)| {
                     k.0 == name && k.1.4 == views && (*part == "all" || k.1.0 == *part)
@@ -612,9 +762,10 @@ pub struct PairedRow {
 }
 
 /// NBV against every other policy, per part and `all`, view count and threshold.
-pub fn paired(rows: &[StepRow], policies: &[ViewPolicy], max_views: usize) -> Vec<PairedRow> {
+pub fn paired(rows: &[StepRow], columns: &[&'static str], max_views: usize) -> Vec<PairedRow> {
     let mut out = Vec::new();
-    if !policies.contains(&ViewPolicy::Nbv) {
+    let nbv = policy_column(ViewPolicy::Nbv);
+    if !columns.contains(&nbv) {
         return out;
     }
     let mut parts = names_in_order(rows.iter().map(|r| r.part.as_str()));
@@ -625,16 +776,14 @@ pub fn paired(rows: &[StepRow], policies: &[ViewPolicy], max_views: usize) -> Ve
     ] {
         let s = successes(rows, &threshold);
         for part in &parts {
-            for &other in policies.iter().filter(|p| **p != ViewPolicy::Nbv) {
+            for &other in columns.iter().filter(|c| **c != nbv) {
                 for views in 1..=max_views {
                     let mut d: Vec<f64> = s
                         .iter()
                         .filter(|((p, k), _)| {
-                            *p == "nbv" && k.4 == views && (*part == "all" || k.0 == *part)
+                            *p == nbv && k.4 == views && (*part == "all" || k.0 == *part)
                         })
-                        .filter_map(|((_, k), &nbv)| {
-                            Some(nbv - s.get(&(policy_column(other), k.clone()))?)
-                        })
+                        .filter_map(|((_, k), &hit)| Some(hit - s.get(&(other, k.clone()))?))
                         .collect();
                     if d.is_empty() {
                         continue;
@@ -643,7 +792,7 @@ pub fn paired(rows: &[StepRow], policies: &[ViewPolicy], max_views: usize) -> Ve
                     d.sort_by(f64::total_cmp);
                     out.push(PairedRow {
                         part: part.to_string(),
-                        other: policy_column(other),
+                        other,
                         views,
                         threshold: threshold_name,
                         n: d.len(),
@@ -708,7 +857,7 @@ pub fn trials_csv(rows: &[StepRow]) -> String {
 pub fn table_markdown(
     rates: &[RateRow],
     paired: &[PairedRow],
-    policies: &[ViewPolicy],
+    columns: &[&'static str],
     max_views: usize,
 ) -> String {
     let mut out = String::new();
@@ -718,23 +867,23 @@ pub fn table_markdown(
         "Rates within 5 mm/5° · 2 mm/2° (%), n trials per cell (Random: the mean of its draws).\n"
     );
     let _ = write!(out, "| part | views | n |");
-    for p in policies {
-        let _ = write!(out, " {} |", policy_column(*p));
+    for c in columns {
+        let _ = write!(out, " {c} |");
     }
     let _ = writeln!(out);
     let _ = write!(out, "|---|---:|---:|");
-    for _ in policies {
+    for _ in columns {
         let _ = write!(out, "---:|");
     }
     let _ = writeln!(out);
     for part in &parts {
         for views in 1..=max_views {
-            let cells: Vec<Option<&RateRow>> = policies
+            let cells: Vec<Option<&RateRow>> = columns
                 .iter()
-                .map(|p| {
-                    rates.iter().find(|r| {
-                        r.part == *part && r.views == views && r.policy == policy_column(*p)
-                    })
+                .map(|c| {
+                    rates
+                        .iter()
+                        .find(|r| r.part == *part && r.views == views && r.policy == *c)
                 })
                 .collect();
             let Some(n) = cells.iter().flatten().map(|r| r.n).next() else {
@@ -781,19 +930,19 @@ pub fn table_markdown(
 /// against views, one colour per policy.
 pub fn fig9_png(
     rates: &[RateRow],
-    policies: &[ViewPolicy],
+    columns: &[&'static str],
     max_views: usize,
 ) -> anyhow::Result<Vec<u8>> {
     use plotters::prelude::*;
     let parts = names_in_order(rates.iter().map(|r| r.part.as_str()));
     let colours = [BLUE, RGBColor(230, 180, 0), RED, GREEN, MAGENTA, CYAN];
-    let columns = 3usize;
-    let rows_n = parts.len().div_ceil(columns).max(1);
+    let panel_columns = 3usize;
+    let rows_n = parts.len().div_ceil(panel_columns).max(1);
     Ok(glint_plot::png(
-        (360 * columns) as u32,
+        (360 * panel_columns) as u32,
         (300 * rows_n) as u32,
         |root| {
-            let areas = root.split_evenly((rows_n, columns));
+            let areas = root.split_evenly((rows_n, panel_columns));
             for (area, part) in areas.iter().zip(&parts) {
                 let mut chart = ChartBuilder::on(area)
                     .caption(*part, (glint_plot::FONT, 18))
@@ -806,8 +955,7 @@ pub fn fig9_png(
                     .x_desc("views")
                     .y_desc("% correct")
                     .draw()?;
-                for (policy, colour) in policies.iter().zip(colours.iter().cycle()) {
-                    let name = policy_column(*policy);
+                for (&name, colour) in columns.iter().zip(colours.iter().cycle()) {
                     let series = |f: &dyn Fn(&RateRow) -> f64| -> Vec<(f64, f64)> {
                         rates
                             .iter()
@@ -848,9 +996,10 @@ pub fn fig9_png(
 pub fn write_outputs(spec: &NbvExperiment, rows: &[StepRow]) -> anyhow::Result<String> {
     let out = &spec.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let rates = rates(rows, &spec.policies, spec.max_views);
-    let paired = paired(rows, &spec.policies, spec.max_views);
-    let table = table_markdown(&rates, &paired, &spec.policies, spec.max_views);
+    let columns = spec.columns();
+    let rates = rates(rows, &columns, spec.max_views);
+    let paired = paired(rows, &columns, spec.max_views);
+    let table = table_markdown(&rates, &paired, &columns, spec.max_views);
     let mut paired_csv = String::from("part,other,views,threshold,n,margin_points,p\n");
     for p in &paired {
         let _ = writeln!(
@@ -865,7 +1014,7 @@ pub fn write_outputs(spec: &NbvExperiment, rows: &[StepRow]) -> anyhow::Result<S
     write_file_atomically(&out.join("table.md"), table.as_bytes())?;
     write_file_atomically(
         &out.join("fig9.png"),
-        &fig9_png(&rates, &spec.policies, spec.max_views)?,
+        &fig9_png(&rates, &columns, spec.max_views)?,
     )?;
     let html = format!(
         "<!doctype html><html><head><meta charset=utf-8><title>Glint: Fig. 9</title></head>\
@@ -920,7 +1069,7 @@ mod tests {
             row("random", 0, 1, 1, 9.0),
             row("random", 1, 1, 1, 9.0),
         ];
-        let policies = [ViewPolicy::Nbv, ViewPolicy::Random];
+        let policies = ["nbv", "random"];
         let r = rates(&rows, &policies, 1);
         let find = |part: &str, policy: &str| {
             r.iter()

@@ -680,15 +680,11 @@ fn choose_next_view(
     }
     // Under the part's error model a candidate adds what its own pose estimate would know,
     // capped by the per-view bias (taken views get zeros and are excluded anyway).
-    let t_o_w = t_w_o.inverse();
     let informations: Vec<Matrix6<f64>> = informations
         .into_iter()
         .zip(&config.candidates)
         .map(|(f, t_w_c)| match (f, &config.refine.error_model) {
-            (Some(f), Some(model)) => {
-                let r_o_c = (t_o_w * t_w_c).rotation.to_rotation_matrix();
-                model.predicted_view_information(&f, &r_o_c)
-            }
+            (Some(f), Some(model)) => model.predicted_candidate_information(&f, t_w_o, t_w_c),
             (f, _) => f.unwrap_or_else(Matrix6::zeros),
         })
         .collect();

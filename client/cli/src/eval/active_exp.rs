@@ -86,19 +86,7 @@ pub fn run_cmd(args: &ActiveArgs) -> anyhow::Result<()> {
             ..Masking::default()
         },
         predict_with_bin: args.predict_bin,
-        error_model: match args.error_model.as_str() {
-            "none" => None,
-            "shipped" => Some(
-                glint_estimation::pose_error_model::PoseErrorModel::shipped(args.part)
-                    .context("--error-model shipped")?,
-            ),
-            path => Some(
-                glint_estimation::pose_error_model::PoseErrorModel::load(std::path::Path::new(
-                    path,
-                ))
-                .context("--error-model")?,
-            ),
-        },
+        error_model: super::error_model_arg("--error-model", &args.error_model, Some(args.part))?,
     };
     println!(
         "Fig. 9 on mock data: {} bins of the {} × {} policies, {} views each, {} candidates, \

@@ -144,3 +144,28 @@ pub fn calibrated_objects(
         })
         .collect()
 }
+
+/// An `--error-model`-style flag's value for `part` (`None`: a mesh): `none` (eq 18's
+/// independent pixels), `shipped` (assets/calibration/<part>/pose_error.json) or a file
+/// `glint eval refine` wrote (`DIR/pose_error/<part>.json`).
+pub fn error_model_arg(
+    flag: &str,
+    value: &str,
+    part: Option<glint_geometry::Part>,
+) -> anyhow::Result<Option<glint_estimation::pose_error_model::PoseErrorModel>> {
+    use anyhow::Context;
+    use glint_estimation::pose_error_model::PoseErrorModel;
+    match (value, part) {
+        ("none", _) => Ok(None),
+        ("shipped", Some(part)) => Ok(Some(
+            PoseErrorModel::shipped(part).with_context(|| format!("{flag} shipped"))?,
+        )),
+        ("shipped", None) => anyhow::bail!(
+            "{flag} shipped: Glint ships error models for its five parts only; give a file \
+             `glint eval refine --mesh …` wrote (DIR/pose_error/<part>.json)"
+        ),
+        (path, _) => Ok(Some(
+            PoseErrorModel::load(std::path::Path::new(path)).with_context(|| flag.to_string())?,
+        )),
+    }
+}

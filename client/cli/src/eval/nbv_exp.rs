@@ -3,6 +3,8 @@
 
 use std::path::PathBuf;
 
+use anyhow::Context;
+
 use glint_eval::fig9::NbvExperiment;
 use glint_geometry::{LengthUnit, Symmetry};
 use glint_orchestrator::session::ViewPolicy;
@@ -63,6 +65,12 @@ pub struct NbvArgs {
     /// The render workers render the bin with the part (beyond the paper).
     #[arg(long)]
     pub predict_bin: bool,
+    /// Beyond the paper: run NBV planned under the camera's error model on each part too
+    /// (column nbv_error_model), as a session under it plans: `shipped`
+    /// (assets/calibration/<part>/pose_error.json) or, for one part or --mesh, a file
+    /// `glint eval refine` wrote (DIR/pose_error/<part>.json).
+    #[arg(long)]
+    pub nbv_error_model: Option<String>,
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -78,6 +86,31 @@ pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
     )?;
     let with_calibration =
         super::calibrated_objects(objects, &parts, &args.calibration, args.mesh.is_some())?;
+    let error_models = match args.nbv_error_model.as_deref() {
+        None => Vec::new(),
+        Some("none") => anyhow::bail!(
+            "--nbv-error-model none: leave the flag out to run without NBV under the model"
+        ),
+        Some(value) => {
+            let parts: Vec<Option<glint_geometry::Part>> = match args.mesh {
+                Some(_) => vec![None],
+                None => parts.iter().copied().map(Some).collect(),
+            };
+            if value != "shipped" && parts.len() > 1 {
+                anyhow::bail!(
+                    "--nbv-error-model {value}: a file is one part's model; give one --parts, \
+                     or `shipped` for several"
+                );
+            }
+            parts
+                .into_iter()
+                .map(|part| {
+                    super::error_model_arg("--nbv-error-model", value, part)?
+                        .context("--nbv-error-model: a model")
+                })
+                .collect::<anyhow::Result<_>>()?
+        }
+    };
     let spec = NbvExperiment {
         objects: with_calibration,
         scenes: args.scenes,
@@ -91,6 +124,7 @@ pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
         random_draws: args.random_draws,
         min_visib_fract: args.min_visib_fract,
         predict_with_bin: args.predict_bin,
+        error_models,
         out: args.out.clone(),
     };
     println!(
@@ -100,7 +134,7 @@ pub fn run_cmd(args: &NbvArgs) -> anyhow::Result<()> {
         spec.objects.len(),
         spec.scenes,
         spec.detection_views,
-        spec.policies.len(),
+        spec.columns().len(),
         spec.max_views,
         spec.candidates,
         spec.camera
