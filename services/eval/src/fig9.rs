@@ -156,6 +156,12 @@ struct Run {
 }
 
 impl Run {
+    /// The error model this run plans under: the part's `model` if it is the NBV run under
+    /// it, none otherwise.
+    fn planning_model<'a>(&self, model: Option<&'a PoseErrorModel>) -> Option<&'a PoseErrorModel> {
+        model.filter(|_| self.under_model)
+    }
+
     fn column(&self) -> &'static str {
         if self.under_model {
             NBV_ERROR_MODEL
@@ -342,8 +348,8 @@ fn choose(
         return Ok((view, None, 0.0));
     };
     let capped: Vec<Matrix6<f64>>;
-    let informations = match (model, run.under_model) {
-        (Some(model), true) => {
+    let informations = match run.planning_model(model) {
+        Some(model) => {
             capped = informations
                 .iter()
                 .zip(candidates)
@@ -351,7 +357,7 @@ fn choose(
                 .collect();
             &capped
         }
-        _ => informations,
+        None => informations,
     };
     let plan = plan_next_view(&run.information, informations, &run.views, prior)?;
     let h = plan.entropies_nats.get(plan.chosen).copied().flatten();
@@ -423,14 +429,14 @@ fn refine_run(
     match refine_sdf(grid, &points, &t_o_w, config) {
         Ok(r) if r.status != RefineStatus::Diverged => {
             run.t_w_o = r.t_o_w.inverse();
-            run.information = match (model, run.under_model) {
-                (Some(model), true) => model.refined_information(
+            run.information = match run.planning_model(model) {
+                Some(model) => model.refined_information(
                     grid,
                     run.views.iter().map(|v| (of(v), candidates[*v])),
                     &r.t_o_w,
                     config,
                 ),
-                _ => r.information,
+                None => r.information,
             };
             format!("{:?}", r.status).to_lowercase()
         }
