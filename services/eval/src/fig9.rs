@@ -748,12 +748,15 @@ pub fn rates(rows: &[StepRow], columns: &[&'static str], max_views: usize) -> Ve
     out
 }
 
-/// NBV against another policy on the same trials at one view count and threshold.
+/// A planner (NBV, or NBV under the error model) against another policy on the same trials
+/// at one view count and threshold.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PairedRow {
     /// The part's name, or `all`.
     pub part: String,
-    /// The policy NBV is compared with.
+    /// The planner: [`ViewPolicy::Nbv`]'s column or [`NBV_ERROR_MODEL`].
+    pub policy: &'static str,
+    /// The policy the planner is compared with.
     pub other: &'static str,
     /// Views taken.
     pub views: usize,
@@ -761,19 +764,20 @@ pub struct PairedRow {
     pub threshold: &'static str,
     /// Trials both policies ran.
     pub n: usize,
-    /// NBV's rate minus the other's, percentage points.
+    /// The planner's rate minus the other's, percentage points.
     pub margin_points: f64,
     /// Two-sided p of the paired sign-flip test on the per-trial differences.
     pub p: f64,
 }
 
-/// NBV against every other policy, per part and `all`, view count and threshold.
+/// Each planner run (NBV, then NBV under the error model) against every other policy, per
+/// part and `all`, view count and threshold; a pair of planners is compared once.
 pub fn paired(rows: &[StepRow], columns: &[&'static str], max_views: usize) -> Vec<PairedRow> {
     let mut out = Vec::new();
-    let nbv = policy_column(ViewPolicy::Nbv);
-    if !columns.contains(&nbv) {
-        return out;
-    }
+    let planners: Vec<&'static str> = [policy_column(ViewPolicy::Nbv), NBV_ERROR_MODEL]
+        .into_iter()
+        .filter(|c| columns.contains(c))
+        .collect();
     let mut parts = names_in_order(rows.iter().map(|r| r.part.as_str()));
     parts.push("all");
     for (threshold_name, threshold) in [
@@ -781,30 +785,36 @@ pub fn paired(rows: &[StepRow], columns: &[&'static str], max_views: usize) -> V
         ("2mm2deg", CorrectThreshold::MM2_DEG2),
     ] {
         let s = successes(rows, &threshold);
-        for part in &parts {
-            for &other in columns.iter().filter(|c| **c != nbv) {
-                for views in 1..=max_views {
-                    let mut d: Vec<f64> = s
-                        .iter()
-                        .filter(|((p, k), _)| {
-                            *p == nbv && k.4 == views && (*part == "all" || k.0 == *part)
-                        })
-                        .filter_map(|((_, k), &hit)| Some(hit - s.get(&(other, k.clone()))?))
-                        .collect();
-                    if d.is_empty() {
-                        continue;
+        for (rank, &policy) in planners.iter().enumerate() {
+            for part in &parts {
+                for &other in columns
+                    .iter()
+                    .filter(|c| **c != policy && !planners[..rank].contains(c))
+                {
+                    for views in 1..=max_views {
+                        let mut d: Vec<f64> = s
+                            .iter()
+                            .filter(|((p, k), _)| {
+                                *p == policy && k.4 == views && (*part == "all" || k.0 == *part)
+                            })
+                            .filter_map(|((_, k), &hit)| Some(hit - s.get(&(other, k.clone()))?))
+                            .collect();
+                        if d.is_empty() {
+                            continue;
+                        }
+                        // The map's order is arbitrary; the test's resampling is seeded, so sort.
+                        d.sort_by(f64::total_cmp);
+                        out.push(PairedRow {
+                            part: part.to_string(),
+                            policy,
+                            other,
+                            views,
+                            threshold: threshold_name,
+                            n: d.len(),
+                            margin_points: 100.0 * d.iter().sum::<f64>() / d.len() as f64,
+                            p: paired_sign_flip_p(&d, 20_000, 0xF169),
+                        });
                     }
-                    // The map's order is arbitrary; the test's resampling is seeded, so sort.
-                    d.sort_by(f64::total_cmp);
-                    out.push(PairedRow {
-                        part: part.to_string(),
-                        other,
-                        views,
-                        threshold: threshold_name,
-                        n: d.len(),
-                        margin_points: 100.0 * d.iter().sum::<f64>() / d.len() as f64,
-                        p: paired_sign_flip_p(&d, 20_000, 0xF169),
-                    });
                 }
             }
         }
@@ -859,7 +869,7 @@ pub fn trials_csv(rows: &[StepRow]) -> String {
 }
 
 /// `table.md`: the rates at 5 mm/5° and 2 mm/2° per part and view count, one column per
-/// policy, and NBV's paired margins on `all`.
+/// policy, and the planners' paired margins on `all`.
 pub fn table_markdown(
     rates: &[RateRow],
     paired: &[PairedRow],
@@ -917,15 +927,16 @@ pub fn table_markdown(
     if !paired.is_empty() {
         let _ = writeln!(
             out,
-            "\nNBV minus each policy on `all`, percentage points, with the two-sided p of a \
-             paired sign-flip test over the trials (20 000 resamples).\n\n\
-             | other | views | threshold | n | margin | p |\n|---|---:|---|---:|---:|---:|"
+            "\nEach planner minus each other policy on `all`, percentage points, with the \
+             two-sided p of a paired sign-flip test over the trials (20 000 resamples).\n\n\
+             | policy | other | views | threshold | n | margin | p |\n\
+             |---|---|---:|---|---:|---:|---:|"
         );
         for p in paired.iter().filter(|p| p.part == "all") {
             let _ = writeln!(
                 out,
-                "| {} | {} | {} | {} | {:+.1} | {:.4} |",
-                p.other, p.views, p.threshold, p.n, p.margin_points, p.p
+                "| {} | {} | {} | {} | {} | {:+.1} | {:.4} |",
+                p.policy, p.other, p.views, p.threshold, p.n, p.margin_points, p.p
             );
         }
     }
@@ -1006,12 +1017,12 @@ pub fn write_outputs(spec: &NbvExperiment, rows: &[StepRow]) -> anyhow::Result<S
     let rates = rates(rows, &columns, spec.max_views);
     let paired = paired(rows, &columns, spec.max_views);
     let table = table_markdown(&rates, &paired, &columns, spec.max_views);
-    let mut paired_csv = String::from("part,other,views,threshold,n,margin_points,p\n");
+    let mut paired_csv = String::from("part,policy,other,views,threshold,n,margin_points,p\n");
     for p in &paired {
         let _ = writeln!(
             paired_csv,
-            "{},{},{},{},{},{:.2},{:.5}",
-            p.part, p.other, p.views, p.threshold, p.n, p.margin_points, p.p
+            "{},{},{},{},{},{},{:.2},{:.5}",
+            p.part, p.policy, p.other, p.views, p.threshold, p.n, p.margin_points, p.p
         );
     }
     write_file_atomically(&out.join("results.csv"), results_csv(&rates).as_bytes())?;
@@ -1094,6 +1105,39 @@ mod tests {
             .unwrap();
         assert_eq!(at5.n, 2);
         assert!((at5.margin_points - 75.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn each_planner_meets_each_other_policy_and_the_two_planners_meet_once() {
+        // NBV right on both trials, the model's run on trial 0, Random on neither.
+        let rows = vec![
+            row("nbv", 0, 0, 1, 1.0),
+            row("nbv", 0, 1, 1, 1.0),
+            row(NBV_ERROR_MODEL, 0, 0, 1, 1.0),
+            row(NBV_ERROR_MODEL, 0, 1, 1, 9.0),
+            row("random", 0, 0, 1, 9.0),
+            row("random", 0, 1, 1, 9.0),
+        ];
+        let p = paired(&rows, &["nbv", "random", NBV_ERROR_MODEL], 1);
+        let margin = |policy: &str, other: &str| {
+            let found: Vec<_> = p
+                .iter()
+                .filter(|x| {
+                    x.part == "all"
+                        && x.threshold == "5mm5deg"
+                        && x.policy == policy
+                        && x.other == other
+                })
+                .collect();
+            assert!(found.len() <= 1, "{policy} against {other} twice");
+            found.first().map(|x| x.margin_points)
+        };
+        // Hit differences per trial: 1 and 1 (NBV − Random), 1 and 0 (model − Random), 0 and 1.
+        assert_eq!(margin("nbv", "random"), Some(100.0));
+        assert_eq!(margin("nbv", NBV_ERROR_MODEL), Some(50.0));
+        assert_eq!(margin(NBV_ERROR_MODEL, "random"), Some(50.0));
+        assert_eq!(margin(NBV_ERROR_MODEL, "nbv"), None);
+        assert_eq!(margin("random", "nbv"), None);
     }
 
     #[test]
